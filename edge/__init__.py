@@ -1,0 +1,1 @@
+"""Per-device edge: decoders and constant-memory dead-reckoning cores (no I/O in the cores)."""

@@ -1,0 +1,1 @@
+"""Venue hub: subscribes to every agent and corrects drift (collisions, beacons, fixes)."""

@@ -1,0 +1,1 @@
+"""Schemas, Zenoh keys, session descriptions and session logs: the only home of wire formats."""

@@ -1,0 +1,62 @@
+"""Zenoh key expressions (also used as MCAP topics), built in one place.
+
+Layout: `reckon/<venue>/<agent>/<stream>[/<sensor>]`. Venue, agent and sensor ids are single
+key chunks: letters, digits, `-` and `_` only, so no id can inject `/`, `*` or `$`.
+"""
+
+from __future__ import annotations
+
+import re
+
+from protocol.errors import ConfigError
+
+ROOT = "reckon"
+_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+
+
+def check_id(value: str, where: str) -> str:
+    """Return `value` if it is a valid id chunk, else raise ConfigError naming `where`."""
+    if not isinstance(value, str) or not _ID.match(value):
+        raise ConfigError(f"{where}: id {value!r} must be 1-64 characters of A-Z a-z 0-9 _ -")
+    return value
+
+
+def imu(venue: str, agent: str, sensor: str) -> str:
+    return f"{ROOT}/{venue}/{agent}/imu/{sensor}"
+
+
+def beacon(venue: str, agent: str, sensor: str) -> str:
+    return f"{ROOT}/{venue}/{agent}/beacon/{sensor}"
+
+
+def truth(venue: str, agent: str) -> str:
+    return f"{ROOT}/{venue}/{agent}/truth/pose"
+
+
+def contact(venue: str, agent: str) -> str:
+    return f"{ROOT}/{venue}/{agent}/truth/contact"
+
+
+def pose(venue: str, agent: str, track: str = "live") -> str:
+    return f"{ROOT}/{venue}/{agent}/pose/{track}"
+
+
+def impact(venue: str, agent: str) -> str:
+    return f"{ROOT}/{venue}/{agent}/event/impact"
+
+
+def correction(venue: str, agent: str) -> str:
+    return f"{ROOT}/{venue}/{agent}/correction"
+
+
+def all_agents(venue: str, stream: str = "**") -> str:
+    """Selector for one stream kind of every agent, e.g. `reckon/demo/*/imu/*`."""
+    return f"{ROOT}/{venue}/*/{stream}"
+
+
+def parse(key: str) -> tuple[str, str, str, str | None]:
+    """Split a key into (venue, agent, stream, sensor or None); ValueError if not ours."""
+    parts = key.split("/")
+    if len(parts) < 4 or parts[0] != ROOT:
+        raise ValueError(f"key {key!r} is not under {ROOT}/<venue>/<agent>/<stream>")
+    return parts[1], parts[2], parts[3], "/".join(parts[4:]) or None

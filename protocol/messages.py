@@ -1,0 +1,177 @@
+"""Message schemas as data tables, compiled at import into protobuf classes.
+
+Why protobuf (recorded in docs/protocol.md): Foxglove and the `mcap` CLI both decode protobuf
+from the FileDescriptorSet stored in the MCAP schema record, so a session opens in either tool
+with no plugin. At the chair load (200 Hz x 3 sensors x 10 chairs, 20-sample batches = 300
+batches/s) a batch is about 0.8 KB (JSON: 4.2 KB) and costs about 15 us to encode and decode on
+this 2-core x86 machine (field-notes.md), so the whole venue needs well under 1 % of one Pi core.
+
+The layouts live here as tables rather than a `.proto` plus generated code: one file to read, no
+protoc step, and the same descriptor goes into every MCAP file. Every message carries
+`schema_version` and an integer nanosecond `timestamp_ns`; fields name their unit.
+"""
+
+from __future__ import annotations
+
+import enum
+from typing import Any
+
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+SCHEMA_VERSION = 1
+PACKAGE = "reckon.v1"
+
+_F = descriptor_pb2.FieldDescriptorProto
+_SCALARS = {
+    "double": _F.TYPE_DOUBLE,
+    "float": _F.TYPE_FLOAT,
+    "int64": _F.TYPE_INT64,
+    "uint32": _F.TYPE_UINT32,
+    "string": _F.TYPE_STRING,
+}
+
+
+class CorrectionKind(enum.IntEnum):
+    """Why a pose was moved."""
+
+    UNKNOWN = 0
+    BEACON = 1
+    COLLISION = 2
+    VIDEO = 3
+    MANUAL = 4
+
+
+class Track(enum.IntEnum):
+    """Which estimate a pose belongs to: published at once, or refined after a lag."""
+
+    UNKNOWN = 0
+    LIVE = 1
+    REFINED = 2
+
+
+class ContactKind(enum.IntEnum):
+    """How two chairs met (simulator truth)."""
+
+    UNKNOWN = 0
+    FRONTAL = 1
+    LATERAL = 2
+
+
+ENUMS: dict[str, type[enum.IntEnum]] = {
+    "CorrectionKind": CorrectionKind,
+    "Track": Track,
+    "ContactKind": ContactKind,
+}
+
+# name -> [(field, type, repeated)]; field numbers follow the order, never reorder a row.
+# Repeated xyz fields are row-major N x 3 (x0, y0, z0, x1, ...).
+TABLES: dict[str, list[tuple[str, str, bool]]] = {
+    # One batch of raw samples from one IMU, in the device's own clock. timestamp_ns is the
+    # first sample; sample i is at timestamp_ns + sample_offset_ns[i] (keeps times to ~3 bytes).
+    "ImuBatch": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("sensor_id", "string", False),
+        ("sequence", "uint32", False),  # batch counter per sensor: gaps reveal lost packets
+        ("sample_offset_ns", "uint32", True),
+        ("accel_g", "float", True),
+        ("gyro_dps", "float", True),
+        ("mag_gauss", "float", True),  # empty when the device has no magnetometer
+    ],
+    "BeaconSighting": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("sensor_id", "string", False),
+        ("beacon_id", "string", False),
+        ("rssi_dbm", "float", False),
+    ],
+    "TruthPose": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("x_m", "double", False),
+        ("y_m", "double", False),
+        ("heading_rad", "double", False),
+    ],
+    "EstimatedPose": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("x_m", "double", False),
+        ("y_m", "double", False),
+        ("heading_rad", "double", False),
+        ("covariance", "double", True),  # 3 x 3 row-major over (x m, y m, heading rad)
+        ("method", "string", False),
+        ("track", "Track", False),
+    ],
+    "ImpactEvent": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("sensor_id", "string", False),
+        ("peak_g", "float", False),  # peak of | |a| - 1 g |
+    ],
+    "Correction": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("kind", "CorrectionKind", False),
+        ("dx_m", "double", False),
+        ("dy_m", "double", False),
+        ("other_agent_id", "string", False),  # the other chair of a collision
+        ("source_id", "string", False),  # beacon id, camera id, operator
+    ],
+    "TruthContact": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("other_agent_id", "string", False),
+        ("kind", "ContactKind", False),
+        ("closing_speed_mps", "float", False),
+    ],
+}
+
+
+def _build_file() -> descriptor_pb2.FileDescriptorProto:
+    file = descriptor_pb2.FileDescriptorProto(name="reckon/v1.proto", package=PACKAGE, syntax="proto3")
+    for enum_name, enum_type in ENUMS.items():
+        e = file.enum_type.add(name=enum_name)
+        for member in enum_type:
+            e.value.add(name=f"{enum_name.upper()}_{member.name}", number=int(member))
+    for message_name, rows in TABLES.items():
+        m = file.message_type.add(name=message_name)
+        for number, (field, type_name, repeated) in enumerate(rows, start=1):
+            f = m.field.add(name=field, number=number)
+            f.label = _F.LABEL_REPEATED if repeated else _F.LABEL_OPTIONAL
+            if type_name in ENUMS:
+                f.type = _F.TYPE_ENUM
+                f.type_name = f".{PACKAGE}.{type_name}"
+            else:
+                f.type = _SCALARS[type_name]
+    return file
+
+
+_POOL = descriptor_pool.DescriptorPool()
+_FILE = _POOL.Add(_build_file())
+CLASSES: dict[str, Any] = {
+    name: message_factory.GetMessageClass(_POOL.FindMessageTypeByName(f"{PACKAGE}.{name}")) for name in TABLES
+}
+ImuBatch = CLASSES["ImuBatch"]
+BeaconSighting = CLASSES["BeaconSighting"]
+TruthPose = CLASSES["TruthPose"]
+EstimatedPose = CLASSES["EstimatedPose"]
+ImpactEvent = CLASSES["ImpactEvent"]
+Correction = CLASSES["Correction"]
+TruthContact = CLASSES["TruthContact"]
+
+
+def new(name: str, **fields: Any) -> Any:
+    """Build message `name` with the current schema version filled in."""
+    return CLASSES[name](schema_version=SCHEMA_VERSION, **fields)
+
+
+def type_name(message: Any) -> str:
+    """Short message name (`ImuBatch`) of a message instance."""
+    return str(message.DESCRIPTOR.name)

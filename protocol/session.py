@@ -1,0 +1,269 @@
+"""Session description: the venue and its agents, with strict loading from TOML/JSON dicts.
+
+A session log (MCAP) stores this description as metadata record `reckon.session` (JSON), and the
+CSV importer reads it from a TOML file. Every key is documented in docs/session-format.md.
+Unknown keys and out-of-range values fail with the key path, e.g.
+`venue.toml: agents[2].sensors[0].mount: 'wheel' is not one of left_wheel, right_wheel, seat`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from protocol.errors import ConfigError
+from protocol.keys import check_id
+
+FORMAT_VERSION = 1
+AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+
+
+class Mount(str, enum.Enum):
+    LEFT_WHEEL = "left_wheel"
+    RIGHT_WHEEL = "right_wheel"
+    SEAT = "seat"
+
+
+class AgentKind(str, enum.Enum):
+    WHEELCHAIR = "wheelchair"
+
+
+@dataclass(frozen=True)
+class Beacon:
+    """A BLE beacon at a fixed place (under a goal)."""
+
+    id: str
+    x_m: float
+    y_m: float
+    radius_m: float = 1.0  # reception zone the paper assumes (its simulation, sec. 4.4.1)
+    tx_power_dbm: float = -59.0  # RSSI at 1 m, the iBeacon calibration figure
+    height_m: float = 2.9  # under the backboard (3.05 m rim), out of play; a floor beacon would be in play
+
+
+@dataclass(frozen=True)
+class Venue:
+    name: str
+    court_length_m: float = 28.0  # FIBA / IWBF court
+    court_width_m: float = 15.0
+    beacons: tuple[Beacon, ...] = ()
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """One IMU of an agent.
+
+    Chair frame: x forward, y left, z up. `spin_axis` (wheels) is the gyro axis, with sign, that
+    reads positive when the chair rolls forward. `forward_axis`/`left_axis` (seat) are the sensor
+    axes that point to the chair's front and left.
+    """
+
+    id: str
+    mount: Mount
+    rate_hz: float = 200.0
+    spin_axis: str | None = None
+    forward_axis: str | None = None
+    left_axis: str | None = None
+
+
+@dataclass(frozen=True)
+class Agent:
+    id: str
+    kind: AgentKind = AgentKind.WHEELCHAIR
+    wheel_diameter_m: float = 0.61  # the paper's chairs: 610 mm (one 670 mm)
+    camber_deg: float = 17.0  # sports chairs 15-20 deg (algorithms.md)
+    sensors: tuple[Sensor, ...] = ()
+    start_x_m: float = 0.0  # start pose, used when the session has no truth
+    start_y_m: float = 0.0
+    start_heading_rad: float = 0.0
+
+    def sensor(self, mount: Mount) -> Sensor | None:
+        """The agent's sensor at `mount`, or None when it has none there."""
+        return next((s for s in self.sensors if s.mount is mount), None)
+
+
+@dataclass(frozen=True)
+class Session:
+    venue: Venue
+    agents: tuple[Agent, ...]
+    source: dict[str, Any] = field(default_factory=dict)  # free-form provenance (sim seed, importer)
+
+    def agent(self, agent_id: str) -> Agent:
+        for agent in self.agents:
+            if agent.id == agent_id:
+                return agent
+        raise KeyError(agent_id)
+
+    def sensor_owner(self) -> dict[str, Agent]:
+        return {s.id: a for a in self.agents for s in a.sensors}
+
+
+# ---------------------------------------------------------------------------------------------
+# Strict loading
+
+
+def _check_keys(data: dict[str, Any], cls: type, where: str, nested: tuple[str, ...] = ()) -> None:
+    allowed = {f.name for f in dataclasses.fields(cls)} | set(nested)
+    for key in data:
+        if key not in allowed:
+            raise ConfigError(f"{where}.{key}: unknown key (allowed: {', '.join(sorted(allowed))})")
+
+
+def _number(data: dict[str, Any], key: str, where: str, default: float, low: float, high: float) -> float:
+    value = data.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{where}.{key}: {value!r} is not a finite number")
+    if not low <= value <= high:
+        raise ConfigError(f"{where}.{key}: {value} is outside [{low}, {high}]")
+    return float(value)
+
+
+def _enum(data: dict[str, Any], key: str, where: str, enum_type: type[enum.Enum], default: Any = None) -> Any:
+    value = data.get(key, default)
+    try:
+        return enum_type(value)
+    except ValueError:
+        choices = ", ".join(str(m.value) for m in enum_type)
+        raise ConfigError(f"{where}.{key}: {value!r} is not one of {choices}") from None
+
+
+def _axis(data: dict[str, Any], key: str, where: str) -> str | None:
+    value = data.get(key)
+    if value is not None and value not in AXES:
+        raise ConfigError(f"{where}.{key}: {value!r} is not one of {', '.join(AXES)}")
+    return value
+
+
+def _required(data: dict[str, Any], key: str, where: str) -> Any:
+    if key not in data:
+        raise ConfigError(f"{where}: missing key {key!r}")
+    return data[key]
+
+
+def _list(data: dict[str, Any], key: str, where: str) -> list[Any]:
+    value = data.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+        raise ConfigError(f"{where}.{key}: expected a list of tables")
+    return value
+
+
+def _beacon(data: dict[str, Any], where: str) -> Beacon:
+    _check_keys(data, Beacon, where)
+    return Beacon(
+        id=check_id(_required(data, "id", where), f"{where}.id"),
+        x_m=_number(data, "x_m", where, _required(data, "x_m", where), -1e3, 1e3),
+        y_m=_number(data, "y_m", where, _required(data, "y_m", where), -1e3, 1e3),
+        radius_m=_number(data, "radius_m", where, 1.0, 0.1, 50.0),
+        tx_power_dbm=_number(data, "tx_power_dbm", where, -59.0, -120.0, 20.0),
+        height_m=_number(data, "height_m", where, 2.9, 0.0, 20.0),
+    )
+
+
+def _sensor(data: dict[str, Any], where: str) -> Sensor:
+    _check_keys(data, Sensor, where)
+    sensor = Sensor(
+        id=check_id(_required(data, "id", where), f"{where}.id"),
+        mount=_enum(data, "mount", where, Mount, data.get("mount")),
+        rate_hz=_number(data, "rate_hz", where, 200.0, 1.0, 10_000.0),
+        spin_axis=_axis(data, "spin_axis", where),
+        forward_axis=_axis(data, "forward_axis", where),
+        left_axis=_axis(data, "left_axis", where),
+    )
+    if sensor.mount is not Mount.SEAT and sensor.spin_axis is None:
+        raise ConfigError(f"{where}: a {sensor.mount.value} sensor needs spin_axis (one of {', '.join(AXES)})")
+    if sensor.mount is Mount.SEAT:
+        forward, left = sensor.forward_axis or "+x", sensor.left_axis or "+y"
+        if forward[1] == left[1]:
+            raise ConfigError(f"{where}: forward_axis {forward} and left_axis {left} must be different axes")
+        sensor = dataclasses.replace(sensor, forward_axis=forward, left_axis=left)
+    return sensor
+
+
+def _agent(data: dict[str, Any], where: str) -> Agent:
+    _check_keys(data, Agent, where)
+    sensors = tuple(_sensor(s, f"{where}.sensors[{i}]") for i, s in enumerate(_list(data, "sensors", where)))
+    mounts = [s.mount for s in sensors]
+    for mount in set(mounts):
+        if mounts.count(mount) > 1:
+            raise ConfigError(f"{where}.sensors: two sensors at mount {mount.value!r}")
+    return Agent(
+        id=check_id(_required(data, "id", where), f"{where}.id"),
+        kind=_enum(data, "kind", where, AgentKind, "wheelchair"),
+        wheel_diameter_m=_number(data, "wheel_diameter_m", where, 0.61, 0.2, 1.0),
+        camber_deg=_number(data, "camber_deg", where, 17.0, 0.0, 30.0),
+        sensors=sensors,
+        start_x_m=_number(data, "start_x_m", where, 0.0, -1e3, 1e3),
+        start_y_m=_number(data, "start_y_m", where, 0.0, -1e3, 1e3),
+        start_heading_rad=_number(data, "start_heading_rad", where, 0.0, -10.0, 10.0),
+    )
+
+
+def session_from_dict(data: dict[str, Any], where: str = "session") -> Session:
+    """Validate a plain dict (from TOML or JSON) into a Session; ConfigError names the key path."""
+    allowed = {"venue", "agents", "source", "format_version"}
+    for key in data:
+        if key not in allowed:
+            raise ConfigError(f"{where}: unknown key {key!r} (allowed: {', '.join(sorted(allowed))})")
+    venue_data = _required(data, "venue", where)
+    if not isinstance(venue_data, dict):
+        raise ConfigError(f"{where}.venue: expected a table")
+    vwhere = f"{where}: venue"
+    _check_keys(venue_data, Venue, vwhere)
+    beacons = tuple(_beacon(b, f"{vwhere}.beacons[{i}]") for i, b in enumerate(_list(venue_data, "beacons", vwhere)))
+    venue = Venue(
+        name=check_id(_required(venue_data, "name", vwhere), f"{vwhere}.name"),
+        court_length_m=_number(venue_data, "court_length_m", vwhere, 28.0, 1.0, 500.0),
+        court_width_m=_number(venue_data, "court_width_m", vwhere, 15.0, 1.0, 500.0),
+        beacons=beacons,
+    )
+    agents = tuple(_agent(a, f"{where}: agents[{i}]") for i, a in enumerate(_list(data, "agents", where)))
+    if not agents:
+        raise ConfigError(f"{where}: no agents (add at least one [[agents]] table)")
+    for kind, ids in (("agent", [a.id for a in agents]), ("sensor", [s.id for a in agents for s in a.sensors]),
+                      ("beacon", [b.id for b in beacons])):
+        duplicates = sorted({item for item in ids if ids.count(item) > 1})
+        if duplicates:
+            raise ConfigError(f"{where}: duplicate {kind} id {duplicates[0]!r}")
+    source = data.get("source", {})
+    if not isinstance(source, dict):
+        raise ConfigError(f"{where}.source: expected a table")
+    return Session(venue=venue, agents=agents, source=dict(source))
+
+
+def load_toml(path: Path) -> Session:
+    """Read a session description TOML; ConfigError names the file and key on any mistake."""
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as error:
+        raise ConfigError(f"{path}: cannot read ({error.strerror})") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"{path}: not valid TOML ({error})") from None
+    return session_from_dict(data, where=str(path))
+
+
+def to_dict(session: Session) -> dict[str, Any]:
+    """Plain-JSON form of a session (enums as their values)."""
+
+    def plain(value: Any) -> Any:
+        if isinstance(value, enum.Enum):
+            return value.value
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        if isinstance(value, (list, tuple)):
+            return [plain(v) for v in value]
+        if isinstance(value, dict):
+            return {k: plain(v) for k, v in value.items()}
+        return value
+
+    data = plain(session)
+    data["format_version"] = FORMAT_VERSION
+    return data
+
+
+def to_json(session: Session) -> str:
+    return json.dumps(to_dict(session), sort_keys=True)

@@ -1,0 +1,219 @@
+"""Session logs: one MCAP file per session (protobuf channels + the session description).
+
+Topics are the Zenoh keys of `protocol.keys`, so a recorded live session and a simulated one look
+the same. The description (venue, agents) is the metadata record `reckon.session`.
+
+Reading is a single streaming pass, so a truncated file (a logger that lost power) yields every
+message before the damage plus a note in `SessionData.problems`, never a traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+from mcap.exceptions import McapError
+from mcap.records import Channel, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+from mcap_protobuf.writer import Writer
+
+from protocol import messages
+from protocol.errors import InputError
+from protocol.session import Session, session_from_dict, to_json
+
+log = logging.getLogger(__name__)
+METADATA_NAME = "reckon.session"
+
+
+class SessionWriter:
+    """Write a session MCAP: `with SessionWriter(path, session) as w: w.write(topic, msg, log_time_ns)`."""
+
+    def __init__(self, path: Path | str, session: Session):
+        self._file = open(path, "wb")
+        self._writer = Writer(self._file)
+        self._writer.add_metadata(METADATA_NAME, {"session_json": to_json(session)})
+
+    def write(self, topic: str, message: Any, log_time_ns: int | None = None) -> None:
+        stamp = int(message.timestamp_ns if log_time_ns is None else log_time_ns)
+        self._writer.write_message(topic, message, log_time=stamp, publish_time=int(message.timestamp_ns))
+
+    def close(self) -> None:
+        if not self._file.closed:
+            self._writer.finish()
+            self._file.close()
+
+    def __enter__(self) -> "SessionWriter":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass
+class ImuSeries:
+    """All samples of one IMU in its own clock, sorted by time. Missing magnetometer = None."""
+
+    agent_id: str
+    sensor_id: str
+    time_ns: np.ndarray  # int64 (N,)
+    accel_g: np.ndarray  # float64 (N, 3)
+    gyro_dps: np.ndarray  # float64 (N, 3)
+    mag_gauss: np.ndarray | None  # float64 (N, 3)
+    lost_batches: int = 0  # gaps in the batch sequence numbers
+
+
+@dataclass
+class TruthSeries:
+    time_ns: np.ndarray
+    x_m: np.ndarray
+    y_m: np.ndarray
+    heading_rad: np.ndarray
+
+
+@dataclass
+class Sightings:
+    time_ns: np.ndarray
+    beacon_id: np.ndarray  # str
+    rssi_dbm: np.ndarray
+
+
+@dataclass(frozen=True)
+class Contact:
+    time_ns: int
+    agent_id: str
+    other_agent_id: str
+    kind: messages.ContactKind
+    closing_speed_mps: float
+
+
+@dataclass
+class SessionData:
+    session: Session
+    imu: dict[str, ImuSeries]
+    truth: dict[str, TruthSeries]
+    sightings: dict[str, Sightings]
+    contacts: list[Contact]
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def start_ns(self) -> int:
+        starts = [int(s.time_ns[0]) for s in self.imu.values() if len(s.time_ns)]
+        starts += [int(t.time_ns[0]) for t in self.truth.values() if len(t.time_ns)]
+        return min(starts) if starts else 0
+
+    @property
+    def end_ns(self) -> int:
+        ends = [int(s.time_ns[-1]) for s in self.imu.values() if len(s.time_ns)]
+        ends += [int(t.time_ns[-1]) for t in self.truth.values() if len(t.time_ns)]
+        return max(ends) if ends else 0
+
+
+def _records(path: Path, problems: list[str]) -> Iterator[Any]:
+    try:
+        reader = StreamReader(str(path), skip_magic=False)
+        for record in reader.records:
+            yield record
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except (McapError, ValueError, EOFError, OSError) as error:
+        # StreamReader raises on the first damaged or missing byte; keep what came before.
+        problems.append(f"{path}: log is damaged or truncated ({type(error).__name__}: {error}); "
+                        "kept every message before the damage")
+
+
+def read_session(path: Path | str) -> SessionData:
+    """Load a whole session log into numpy arrays. InputError if it is not a reckon session."""
+    path = Path(path)
+    problems: list[str] = []
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[str, Any]] = {}
+    session: Session | None = None
+    batches: dict[str, list[Any]] = defaultdict(list)
+    truth_rows: dict[str, list[tuple[int, float, float, float]]] = defaultdict(list)
+    sighting_rows: dict[str, list[tuple[int, str, float]]] = defaultdict(list)
+    contacts: list[Contact] = []
+    skipped: dict[str, int] = defaultdict(int)
+    for record in _records(path, problems):
+        if isinstance(record, Schema):
+            schemas[record.id] = record.name
+        elif isinstance(record, Channel):
+            name = schemas.get(record.schema_id, "")
+            short = name.removeprefix(messages.PACKAGE + ".")
+            channels[record.id] = (record.topic, messages.CLASSES.get(short) if name.startswith(messages.PACKAGE) else None)
+        elif isinstance(record, Metadata) and record.name == METADATA_NAME:
+            try:
+                session = session_from_dict(json.loads(record.metadata["session_json"]), where=f"{path} metadata")
+            except (KeyError, json.JSONDecodeError) as error:
+                raise InputError(f"{path}: metadata {METADATA_NAME} is unreadable ({error})") from None
+        elif isinstance(record, Message):
+            topic, cls = channels.get(record.channel_id, ("?", None))
+            if cls is None:
+                skipped[topic] += 1
+                continue
+            msg = cls.FromString(record.data)
+            if msg.schema_version > messages.SCHEMA_VERSION:
+                skipped[f"{topic} (schema_version {msg.schema_version} > {messages.SCHEMA_VERSION})"] += 1
+                continue
+            kind = msg.DESCRIPTOR.name
+            if kind == "ImuBatch":
+                batches[msg.sensor_id].append(msg)
+            elif kind == "TruthPose":
+                truth_rows[msg.agent_id].append((msg.timestamp_ns, msg.x_m, msg.y_m, msg.heading_rad))
+            elif kind == "BeaconSighting":
+                sighting_rows[msg.agent_id].append((msg.timestamp_ns, msg.beacon_id, msg.rssi_dbm))
+            elif kind == "TruthContact":
+                contacts.append(Contact(msg.timestamp_ns, msg.agent_id, msg.other_agent_id,
+                                        messages.ContactKind(msg.kind), msg.closing_speed_mps))
+    if session is None:
+        raise InputError(f"{path}: not a reckon session (no '{METADATA_NAME}' metadata record"
+                         + (f"; {problems[0]}" if problems else "") + ")")
+    for topic, count in skipped.items():
+        problems.append(f"{path}: skipped {count} messages on {topic} (not a reckon schema)")
+    owners = session.sensor_owner()
+    imu = {sensor_id: _imu_series(owners[sensor_id].id if sensor_id in owners else rows[0].agent_id, sensor_id, rows)
+           for sensor_id, rows in batches.items()}
+    truth = {}
+    for agent_id, rows in truth_rows.items():
+        arr = np.array(sorted(rows), dtype=np.float64)
+        truth[agent_id] = TruthSeries(np.array([r[0] for r in sorted(rows)], dtype=np.int64), arr[:, 1], arr[:, 2], arr[:, 3])
+    sightings = {}
+    for agent_id, rows in sighting_rows.items():
+        rows.sort(key=lambda r: r[0])
+        sightings[agent_id] = Sightings(np.array([r[0] for r in rows], dtype=np.int64),
+                                        np.array([r[1] for r in rows]), np.array([r[2] for r in rows]))
+    contacts.sort(key=lambda c: c.time_ns)
+    for problem in problems:
+        log.warning("%s", problem)
+    return SessionData(session, imu, truth, sightings, contacts, problems)
+
+
+def _imu_series(agent_id: str, sensor_id: str, rows: list[Any]) -> ImuSeries:
+    rows.sort(key=lambda m: (m.timestamp_ns, m.sequence))
+    sequences = np.array([m.sequence for m in rows], dtype=np.int64)
+    lost = int(np.sum(np.clip(np.diff(sequences) - 1, 0, None))) if len(rows) > 1 else 0
+    times = np.concatenate([m.timestamp_ns + np.asarray(m.sample_offset_ns, dtype=np.int64) for m in rows])
+    accel = np.concatenate([np.asarray(m.accel_g, dtype=np.float64) for m in rows]).reshape(-1, 3)
+    gyro = np.concatenate([np.asarray(m.gyro_dps, dtype=np.float64) for m in rows]).reshape(-1, 3)
+    has_mag = all(len(m.mag_gauss) for m in rows)
+    mag = np.concatenate([np.asarray(m.mag_gauss, dtype=np.float64) for m in rows]).reshape(-1, 3) if has_mag else None
+    order = np.argsort(times, kind="stable")
+    keep = order[np.concatenate([[True], np.diff(times[order]) > 0])]  # drop repeated samples
+    return ImuSeries(agent_id, sensor_id, times[keep], accel[keep], gyro[keep],
+                     None if mag is None else mag[keep], lost)
+
+
+def imu_batch(agent_id: str, sensor_id: str, sequence: int, time_ns: np.ndarray, accel_g: np.ndarray,
+              gyro_dps: np.ndarray, mag_gauss: np.ndarray | None) -> Any:
+    """Build one ImuBatch from arrays (times int64 ns, xyz arrays N x 3)."""
+    offsets = time_ns - time_ns[0]
+    if len(offsets) and int(offsets[-1]) > 0xFFFFFFFF:
+        raise ValueError(f"batch spans {int(offsets[-1])} ns, more than the 4.29 s a uint32 offset holds")
+    return messages.new(
+        "ImuBatch", timestamp_ns=int(time_ns[0]), agent_id=agent_id, sensor_id=sensor_id, sequence=sequence,
+        sample_offset_ns=offsets.astype(np.uint32).tolist(), accel_g=np.ravel(accel_g).tolist(),
+        gyro_dps=np.ravel(gyro_dps).tolist(), mag_gauss=[] if mag_gauss is None else np.ravel(mag_gauss).tolist())

@@ -1,0 +1,1 @@
+"""The reckon application: one CLI, evaluation, importers."""

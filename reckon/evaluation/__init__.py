@@ -1,0 +1,1 @@
+"""Offline evaluation (`reckon eval`): run estimators over a session log and score them against truth."""

@@ -1,0 +1,111 @@
+"""`reckon eval`: every heading x correction set of the paper's method, scored against truth."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from edge.impacts import PAPER_THRESHOLD_G, detect_impacts
+from hub.paper_rules import Collision, pair_impacts
+from protocol.errors import InputError
+from protocol.session_log import SessionData, read_session
+from reckon.evaluation.headings import HeadingSource, headings
+from reckon.evaluation.inputs import EvalInputs, build_inputs
+from reckon.evaluation.metrics import (DetectionScore, ErrorSummary, average_summaries, error_summary,
+                                       score_collisions)
+from reckon.evaluation.paper_run import VIDEO_RUNS, reception_from_sightings, reception_from_truth, run_paper
+
+log = logging.getLogger(__name__)
+
+CORRECTION_SETS: tuple[tuple[str, ...], ...] = (
+    (), ("beacon",), ("beacon_zone",), ("collision",), ("collision_midpoint",),
+    ("beacon", "collision"), ("beacon_zone", "collision"), ("video",),
+)
+DETECTION_THRESHOLDS_G = tuple(float(g) for g in range(4, 13))  # the paper's Fig. 5 range
+
+
+@dataclass
+class ResultRow:
+    method: str
+    heading: str
+    corrections: tuple[str, ...]
+    summary: ErrorSummary
+    corrections_applied: int
+    team_curve_m: np.ndarray  # team-mean error per frame (first run for random fixes)
+    x_m: np.ndarray  # (agents, frames) estimate of the first run
+    y_m: np.ndarray
+
+
+@dataclass
+class EvalReport:
+    session_path: Path
+    agent_ids: list[str]
+    frame_s: np.ndarray
+    truth_x_m: np.ndarray
+    truth_y_m: np.ndarray
+    court_m: tuple[float, float]
+    rows: list[ResultRow] = field(default_factory=list)
+    detection: list[DetectionScore] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+
+def detect_collisions(inputs: EvalInputs, threshold_g: float) -> list[Collision]:
+    impacts = []
+    for agent in inputs.agents:
+        if agent.seat_accel_g is not None:
+            impacts += [(i.time_ns, agent.agent.id) for i in detect_impacts(agent.seat_time_ns, agent.seat_accel_g, threshold_g)]
+    return pair_impacts(impacts)
+
+
+def evaluate(path: Path, progress: Callable[[str], None] = lambda _: None) -> EvalReport:
+    data = read_session(path)
+    return evaluate_data(data, path, progress)
+
+
+def evaluate_data(data: SessionData, path: Path, progress: Callable[[str], None] = lambda _: None) -> EvalReport:
+    inputs = build_inputs(data)
+    if any(a.truth_x_m is None for a in inputs.agents):
+        missing = [a.agent.id for a in inputs.agents if a.truth_x_m is None]
+        raise InputError(f"{path}: no truth poses for {', '.join(missing)}; `reckon eval` scores against truth")
+    seed = int(data.session.source.get("seed", 0))
+    frames = inputs.frame_index
+    frame_s = (inputs.frame_ns - inputs.frame_ns[0]) * 1e-9
+    truth_x = np.array([a.truth_x_m[frames] for a in inputs.agents])
+    truth_y = np.array([a.truth_y_m[frames] for a in inputs.agents])
+    venue = data.session.venue
+    report = EvalReport(path, [a.agent.id for a in inputs.agents], frame_s, truth_x, truth_y,
+                        (venue.court_length_m, venue.court_width_m), problems=list(data.problems))
+    zones = {
+        "beacon": np.array([reception_from_sightings(inputs.frame_ns, data.sightings.get(a.agent.id), venue) for a in inputs.agents]),
+        "beacon_zone": np.array([reception_from_truth(tx, ty, venue) for tx, ty in zip(truth_x, truth_y)]),
+    }
+    progress("collision detection")
+    detected_at = {g: detect_collisions(inputs, g) for g in DETECTION_THRESHOLDS_G}
+    report.detection = [score_collisions(g, detected_at[g], data.contacts) for g in DETECTION_THRESHOLDS_G]
+    collisions = detected_at[PAPER_THRESHOLD_G]
+    sources = [HeadingSource.TRUE, HeadingSource.VIDEO]
+    if all(a.seat_mag is not None for a in inputs.agents):
+        sources.append(HeadingSource.SENSORS)
+    else:
+        report.problems.append("some seat sensors have no magnetometer: heading 'sensors' skipped")
+    for source in sources:
+        heading = headings(inputs, source, np.random.default_rng([seed, 1]))
+        for corrections in CORRECTION_SETS:
+            progress(f"paper, heading {source.value}, corrections {'+'.join(corrections) or 'none'}")
+            runs = VIDEO_RUNS if "video" in corrections else 1
+            summaries, first = [], None
+            for run in range(runs):
+                estimate = run_paper(inputs, heading, frozenset(corrections), venue, zones, collisions,
+                                     np.random.default_rng([seed, 2, run]))
+                error = np.hypot(estimate.x_m - truth_x, estimate.y_m - truth_y)
+                summaries.append(error_summary(error, frame_s))
+                if first is None:
+                    first = (estimate, np.nanmean(error, axis=0))
+            estimate, curve = first
+            report.rows.append(ResultRow("paper", source.value, corrections, average_summaries(summaries),
+                                         estimate.corrections_applied, curve, estimate.x_m, estimate.y_m))
+    return report

@@ -1,0 +1,54 @@
+"""The evaluation as JSON (one object) and as a text table."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from reckon.evaluation.evaluate import EvalReport
+
+
+def _round(value: float | None) -> float | None:
+    return None if value is None else round(value, 4)
+
+
+def to_json(report: EvalReport) -> dict[str, Any]:
+    return {
+        "session": str(report.session_path),
+        "results": [
+            {"method": row.method, "heading": row.heading, "corrections": list(row.corrections),
+             **{k: _round(v) for k, v in dataclasses.asdict(row.summary).items()},
+             "corrections_applied": row.corrections_applied}
+            for row in report.rows
+        ],
+        "collision_detection": [
+            {"threshold_g": s.threshold_g, "precision": _round(s.precision), "recall": _round(s.recall),
+             "detected": s.detected, "true_contacts": s.true_contacts}
+            for s in report.detection
+        ],
+        "problems": report.problems,
+    }
+
+
+def to_table(report: EvalReport) -> str:
+    lines = [f"session {report.session_path}: {len(report.agent_ids)} agents, "
+             f"{report.frame_s[-1]:.0f} s, errors per 10 fps frame",
+             f"{'method':7} {'heading':8} {'corrections':26} {'mean':>6} {'max team':>9} {'worst':>6} "
+             f"{'final':>6} {'@120s':>6} {'fixes':>6}"]
+    for row in report.rows:
+        s = row.summary
+        lines.append(f"{row.method:7} {row.heading:8} {'+'.join(row.corrections) or 'none':26} "
+                     f"{s.mean_error_m:6.2f} {s.max_team_mean_error_m:9.2f} {s.worst_agent_mean_error_m:6.2f} "
+                     f"{s.final_team_mean_error_m:6.2f} {s.team_mean_error_at_120s_m:6.2f} {row.corrections_applied:6d}")
+    lines.append("errors in metres: mean over agents and time; max over time of the team mean (the paper's "
+                 "figure); worst agent's mean; team mean at the end and at 120 s")
+    lines.append("")
+    lines.append("collision detection (pairs within 0.5 s; 3+ chairs at once skipped), against true contacts")
+    lines.append(f"{'threshold g':>11} {'detected':>8} {'true':>5} {'precision':>9} {'recall':>6}")
+    for s in report.detection:
+        p = "-" if s.precision is None else f"{s.precision:.2f}"
+        r = "-" if s.recall is None else f"{s.recall:.2f}"
+        lines.append(f"{s.threshold_g:11.0f} {s.detected:8d} {s.true_contacts:5d} {p:>9} {r:>6}")
+    for problem in report.problems:
+        lines.append(f"note: {problem}")
+    return "\n".join(lines)

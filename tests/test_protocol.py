@@ -1,0 +1,147 @@
+"""Protocol: message round-trips, keys, strict session descriptions, MCAP session logs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from protocol import keys, messages
+from protocol.errors import ConfigError, InputError
+from protocol.session import load_toml, session_from_dict, to_dict
+from protocol.session_log import SessionWriter, imu_batch, read_session
+
+SESSION = {
+    "venue": {"name": "court", "beacons": [{"id": "goal-a", "x_m": 1.575, "y_m": 7.5}]},
+    "agents": [{"id": "chair01", "wheel_diameter_m": 0.67, "sensors": [
+        {"id": "chair01-left", "mount": "left_wheel", "spin_axis": "+z"},
+        {"id": "chair01-right", "mount": "right_wheel", "spin_axis": "-z"},
+        {"id": "chair01-seat", "mount": "seat"}]}],
+}
+
+
+def test_every_message_round_trips_with_schema_version():
+    samples = {
+        "ImuBatch": dict(timestamp_ns=1, agent_id="a", sensor_id="s", sequence=3, sample_offset_ns=[0, 5],
+                         accel_g=[0.0] * 6, gyro_dps=[1.5] * 6),
+        "BeaconSighting": dict(timestamp_ns=2, agent_id="a", sensor_id="s", beacon_id="b", rssi_dbm=-71.5),
+        "TruthPose": dict(timestamp_ns=3, agent_id="a", x_m=1.25, y_m=-2.5, heading_rad=0.5),
+        "EstimatedPose": dict(timestamp_ns=4, agent_id="a", x_m=1.0, y_m=2.0, covariance=[0.1] * 9,
+                              method="paper", track=messages.Track.LIVE),
+        "ImpactEvent": dict(timestamp_ns=5, agent_id="a", sensor_id="s", peak_g=9.5),
+        "Correction": dict(timestamp_ns=6, agent_id="a", kind=messages.CorrectionKind.COLLISION, dx_m=0.5,
+                           other_agent_id="b"),
+        "TruthContact": dict(timestamp_ns=7, agent_id="a", other_agent_id="b", kind=messages.ContactKind.LATERAL,
+                             closing_speed_mps=1.5),
+    }
+    assert set(samples) == set(messages.TABLES)
+    for name, fields in samples.items():
+        message = messages.new(name, **fields)
+        decoded = messages.CLASSES[name].FromString(message.SerializeToString())
+        assert decoded == message
+        assert decoded.schema_version == messages.SCHEMA_VERSION
+
+
+def test_keys_are_built_and_parsed_in_one_place():
+    key = keys.imu("court", "chair01", "chair01-left")
+    assert key == "reckon/court/chair01/imu/chair01-left"
+    assert keys.parse(key) == ("court", "chair01", "imu", "chair01-left")
+    assert keys.all_agents("court", "imu/*") == "reckon/court/*/imu/*"
+    with pytest.raises(ValueError, match="not under"):
+        keys.parse("other/court")
+    with pytest.raises(ConfigError, match="chair/1"):
+        keys.check_id("chair/1", "agents[0].id")
+
+
+def test_session_description_round_trips():
+    session = session_from_dict(SESSION)
+    assert session_from_dict(to_dict(session)) == session
+    assert session.agent("chair01").wheel_diameter_m == 0.67
+    assert session.agent("chair01").sensors[2].forward_axis == "+x"  # seat default: aligned with the chair
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda d: d["agents"][0].update(wheel_size=1), r"agents\[0\]\.wheel_size: unknown key"),
+    (lambda d: d["agents"][0]["sensors"][0].update(mount="wheel"), r"sensors\[0\]\.mount: 'wheel' is not one of"),
+    (lambda d: d["agents"][0]["sensors"][1].update(mount="left_wheel"), "two sensors at mount 'left_wheel'"),
+    (lambda d: d["agents"][0]["sensors"][1].update(id="chair01-left"), "duplicate sensor id 'chair01-left'"),
+    (lambda d: d["agents"][0].update(wheel_diameter_m=6.1), r"wheel_diameter_m: 6.1 is outside \[0.2, 1.0\]"),
+    (lambda d: d["agents"][0]["sensors"][0].pop("spin_axis"), "needs spin_axis"),
+    (lambda d: d["venue"]["beacons"][0].pop("x_m"), "missing key 'x_m'"),
+    (lambda d: d.update(agent=[]), "unknown key 'agent'"),
+])
+def test_session_description_errors_name_the_key(mutate, message):
+    import copy
+
+    data = copy.deepcopy(SESSION)
+    mutate(data)
+    with pytest.raises(ConfigError, match=message):
+        session_from_dict(data)
+
+
+def test_toml_errors_name_the_file(tmp_path):
+    path = tmp_path / "venue.toml"
+    path.write_text('[venue]\nname = "court"\ncolour = "red"\n')
+    with pytest.raises(ConfigError, match=r"venue.toml: venue.colour: unknown key"):
+        load_toml(path)
+    path.write_text("[venue\n")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_toml(path)
+
+
+def _write_log(path, batches=30):
+    session = session_from_dict(SESSION)
+    rng = np.random.default_rng(0)
+    written = []
+    with SessionWriter(path, session) as writer:
+        for b in range(batches):
+            times = 10**12 + (np.arange(20) + 20 * b) * 5_000_000
+            accel, gyro = rng.normal(size=(20, 3)), rng.normal(size=(20, 3))
+            mag = rng.normal(size=(20, 3))
+            writer.write(keys.imu("court", "chair01", "chair01-seat"),
+                         imu_batch("chair01", "chair01-seat", b, times, accel, gyro, mag))
+            written.append((times, accel, gyro, mag))
+        writer.write(keys.truth("court", "chair01"),
+                     messages.new("TruthPose", timestamp_ns=10**12, agent_id="chair01", x_m=3.0, y_m=4.0))
+    return session, written
+
+
+def test_session_log_round_trip(tmp_path):
+    session, written = _write_log(tmp_path / "s.mcap")
+    data = read_session(tmp_path / "s.mcap")
+    assert data.session == session
+    series = data.imu["chair01-seat"]
+    assert np.array_equal(series.time_ns, np.concatenate([w[0] for w in written]))
+    # float32 on the wire
+    np.testing.assert_allclose(series.gyro_dps, np.concatenate([w[2] for w in written]), rtol=1e-6, atol=1e-6)
+    assert series.mag_gauss is not None and series.lost_batches == 0
+    assert data.truth["chair01"].x_m[0] == 3.0
+    assert data.problems == []
+
+
+def test_truncated_log_keeps_what_came_before(tmp_path):
+    _write_log(tmp_path / "s.mcap", batches=3000)  # several MCAP chunks
+    raw = (tmp_path / "s.mcap").read_bytes()
+    (tmp_path / "cut.mcap").write_bytes(raw[: int(len(raw) * 0.7)])
+    data = read_session(tmp_path / "cut.mcap")
+    assert "truncated" in data.problems[0]
+    kept = len(data.imu["chair01-seat"].time_ns)
+    assert 0 < kept < 3000 * 20
+
+
+def test_not_a_session_is_a_clear_error(tmp_path):
+    (tmp_path / "x.mcap").write_bytes(b"not an mcap at all")
+    with pytest.raises(InputError, match="not a reckon session"):
+        read_session(tmp_path / "x.mcap")
+    with pytest.raises(InputError, match="no such file"):
+        read_session(tmp_path / "missing.mcap")
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.integers(min_value=0, max_value=4_000_000_000), min_size=1, max_size=40))
+def test_imu_batch_times_survive_the_offset_encoding(offsets):
+    times = 5 * 10**17 + np.array(sorted(offsets), dtype=np.int64)
+    message = imu_batch("a", "s", 0, times, np.zeros((len(times), 3)), np.zeros((len(times), 3)), None)
+    decoded = messages.ImuBatch.FromString(message.SerializeToString())
+    assert np.array_equal(decoded.timestamp_ns + np.array(decoded.sample_offset_ns, dtype=np.int64), times)
