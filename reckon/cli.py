@@ -43,6 +43,12 @@ def _overrides(pairs: list[str]) -> dict[str, str]:
     return result
 
 
+def _key_value(text: str) -> str:
+    if "=" not in text:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected KEY=VALUE")
+    return text
+
+
 def run_sim(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     from sim_devices.wheelchair import params_with_overrides, simulate
 
@@ -61,7 +67,10 @@ def run_import(args: argparse.Namespace, progress: Callable[[str], None]) -> int
     else:
         from reckon.importers.ngimu import import_ngimu_folder
 
-        report = import_ngimu_folder(Path(args.folder), Path(args.output))
+        mounts = dict(pair.split("=", 1) for pair in args.mount) if args.mount else None
+        spin_axes = dict(pair.split("=", 1) for pair in args.spin_axis) if args.spin_axis else None
+        report = import_ngimu_folder(Path(args.folder), Path(args.output), mounts=mounts, spin_axes=spin_axes,
+                                     wheel_diameter_m=args.wheel_diameter_m, agent_id=args.agent, venue=args.venue)
     print(report)
     return 0
 
@@ -116,6 +125,14 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("format", choices=["csv", "ngimu"], help="csv: docs/csv-import.md; ngimu: x-io NGIMU folders")
     imp.add_argument("folder")
     imp.add_argument("-o", "--output", required=True)
+    ngimu = imp.add_argument_group("ngimu options")
+    ngimu.add_argument("--wheel-diameter-m", type=float, default=0.62, help="wheel diameter (default 0.62 m)")
+    ngimu.add_argument("--agent", default="chair", help="agent id (default chair)")
+    ngimu.add_argument("--venue", default="lab", help="venue name (default lab)")
+    ngimu.add_argument("--mount", action="append", default=[], type=_key_value, metavar="DEVICE=MOUNT",
+                       help="device folder, serial or sensor id = seat|left_wheel|right_wheel (default: from names)")
+    ngimu.add_argument("--spin-axis", action="append", default=[], type=_key_value, metavar="WHEEL=AXIS",
+                       help="e.g. left_wheel=+y (default: found from the data, assuming mostly forward pushing)")
     imp.set_defaults(run=run_import)
 
     ev = sub.add_parser("eval", help="run the estimators over a session and score them against truth")
@@ -145,6 +162,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # `reckon eval ... | head`: the reader left; not an error
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

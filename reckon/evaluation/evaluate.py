@@ -87,7 +87,11 @@ def evaluate_data(data: SessionData, path: Path, progress: Callable[[str], None]
     detected_at = {g: detect_collisions(inputs, g) for g in DETECTION_THRESHOLDS_G}
     report.detection = [score_collisions(g, detected_at[g], data.contacts) for g in DETECTION_THRESHOLDS_G]
     collisions = detected_at[PAPER_THRESHOLD_G]
-    sources = [HeadingSource.TRUE, HeadingSource.VIDEO]
+    sources = [HeadingSource.VIDEO]
+    if all(a.truth_heading_rad is not None for a in inputs.agents):
+        sources.insert(0, HeadingSource.TRUE)
+    else:
+        report.problems.append("truth has no headings: heading 'true' skipped")
     if all(a.seat_mag is not None for a in inputs.agents):
         sources.append(HeadingSource.SENSORS)
     else:

@@ -52,7 +52,7 @@ def video_heading(inputs: EvalInputs, agent: AgentInputs, rng: np.random.Generat
     direction = np.arctan2(vy, vx)
     moving = np.hypot(vx, vy) >= VIDEO_MIN_SPEED_MPS
     held = np.empty_like(direction)
-    last = agent.truth_heading_rad[0]  # the start heading is known, as the start position is
+    last = agent.start_pose()[2]  # the start heading is known, as the start position is
     for k in range(len(direction)):
         if moving[k]:
             last = direction[k]

@@ -33,9 +33,11 @@ class AgentInputs:
     seat_mag: np.ndarray | None  # chair frame, gauss
 
     def start_pose(self) -> tuple[float, float, float]:
+        """The known start pose: from truth where there is truth, else the session description."""
+        heading = self.agent.start_heading_rad if self.truth_heading_rad is None else float(self.truth_heading_rad[0])
         if self.truth_x_m is not None:
-            return float(self.truth_x_m[0]), float(self.truth_y_m[0]), float(self.truth_heading_rad[0])
-        return self.agent.start_x_m, self.agent.start_y_m, self.agent.start_heading_rad
+            return float(self.truth_x_m[0]), float(self.truth_y_m[0]), heading
+        return self.agent.start_x_m, self.agent.start_y_m, heading
 
 
 @dataclass
@@ -83,6 +85,7 @@ def build_inputs(data: SessionData) -> EvalInputs:
         if truth is not None and len(truth.time_ns) >= 2:
             tx = np.interp(grid, truth.time_ns, truth.x_m)
             ty = np.interp(grid, truth.time_ns, truth.y_m)
-            th = np.interp(grid, truth.time_ns, np.unwrap(truth.heading_rad))
+            if np.all(np.isfinite(truth.heading_rad)):  # truth from a CSV may have positions only
+                th = np.interp(grid, truth.time_ns, np.unwrap(truth.heading_rad))
         agents.append(AgentInputs(agent, travel, tx, ty, th, seat_time, seat_accel, seat_mag))
     return EvalInputs(grid, agents)
