@@ -8,18 +8,29 @@ with tracking noise, smoothed, differenced; direction held while the chair is ne
 from __future__ import annotations
 
 import enum
+from dataclasses import dataclass
 
 import numpy as np
 
 from edge.mag_heading import magnetometer_heading
-from reckon.evaluation.inputs import FRAME_HZ, AgentInputs, EvalInputs
+from reckon.evaluation.inputs import FRAME_HZ, GRID_HZ, AgentInputs, EvalInputs
 
-# Position noise of video tracking, 1 sigma per axis per frame. Commercial multi-camera tracking
-# is about 0.1 m (Linke et al. 2020, PLoS ONE 15:e0230179, TRACAB); hand or single-camera
-# annotation of practice footage, as in the paper, is worse (assumption: 0.2-0.3 m). Middle value.
-VIDEO_POSITION_NOISE_M = 0.15
-VIDEO_SMOOTHING_FRAMES = 5  # centred moving average, 0.5 s: what an analyst's smoother would do
-VIDEO_MIN_SPEED_MPS = 0.3  # below this the direction of motion is noise: hold the last one
+
+
+@dataclass(frozen=True)
+class VideoModel:
+    """How the paper's video-derived heading is rebuilt."""
+
+    # Position noise of video tracking, 1 sigma per axis per frame. Commercial multi-camera
+    # tracking is about 0.1 m (Linke et al. 2020, PLoS ONE 15:e0230179, TRACAB); hand or
+    # single-camera annotation of practice footage, as in the paper, is worse (assumption:
+    # 0.2-0.3 m). Default: the middle value.
+    position_noise_m: float = 0.15
+    smoothing_frames: int = 5  # centred moving average, 0.5 s: what an analyst's smoother would do
+    min_speed_mps: float = 0.3  # below this the direction of motion is noise: hold the last one
+    # Video clock minus sensor clock. The paper does not say how video and sensors were aligned;
+    # 0 assumes perfectly. Used only to show what a misalignment would cost (`reckon calibrate`).
+    sync_offset_s: float = 0.0
 
 
 class HeadingSource(str, enum.Enum):
@@ -34,7 +45,8 @@ def true_heading(agent: AgentInputs) -> np.ndarray:
     return agent.truth_heading_rad
 
 
-def video_heading(inputs: EvalInputs, agent: AgentInputs, rng: np.random.Generator) -> np.ndarray:
+def video_heading(inputs: EvalInputs, agent: AgentInputs, rng: np.random.Generator,
+                  model: VideoModel = VideoModel()) -> np.ndarray:
     """Movement direction from noisy 10 fps positions, on the grid (unwrapped).
 
     Direction of motion points backwards during a backward push, while eq. 1-2 move the chair by
@@ -44,20 +56,21 @@ def video_heading(inputs: EvalInputs, agent: AgentInputs, rng: np.random.Generat
     if agent.truth_x_m is None:
         raise ValueError(f"agent {agent.agent.id}: no truth, so no video")
     frames = inputs.frame_index
-    noise = rng.normal(0.0, VIDEO_POSITION_NOISE_M, size=(len(frames), 2))
-    x = _smooth(agent.truth_x_m[frames] + noise[:, 0])
-    y = _smooth(agent.truth_y_m[frames] + noise[:, 1])
+    noise = rng.normal(0.0, model.position_noise_m, size=(len(frames), 2))
+    x = _smooth(agent.truth_x_m[frames] + noise[:, 0], model.smoothing_frames)
+    y = _smooth(agent.truth_y_m[frames] + noise[:, 1], model.smoothing_frames)
     vx = np.gradient(x) * FRAME_HZ
     vy = np.gradient(y) * FRAME_HZ
     direction = np.arctan2(vy, vx)
-    moving = np.hypot(vx, vy) >= VIDEO_MIN_SPEED_MPS
+    moving = np.hypot(vx, vy) >= model.min_speed_mps
     held = np.empty_like(direction)
     last = agent.start_pose()[2]  # the start heading is known, as the start position is
     for k in range(len(direction)):
         if moving[k]:
             last = direction[k]
         held[k] = last
-    heading = np.interp(np.arange(len(inputs.grid_ns)), frames, np.unwrap(held))
+    # the heading used at sensor time t is the one the video shows at t + offset
+    heading = np.interp(np.arange(len(inputs.grid_ns)) + model.sync_offset_s * GRID_HZ, frames, np.unwrap(held))
     backward = np.concatenate([agent.travel_m, [0.0]]) < 0.0
     return heading + np.pi * backward
 
@@ -70,18 +83,21 @@ def sensor_heading(inputs: EvalInputs, agent: AgentInputs) -> np.ndarray:
     return np.interp(inputs.grid_ns, agent.seat_time_ns, heading)
 
 
-def headings(inputs: EvalInputs, source: HeadingSource, rng: np.random.Generator) -> list[np.ndarray]:
+def headings(inputs: EvalInputs, source: HeadingSource, rng: np.random.Generator,
+             video: VideoModel = VideoModel()) -> list[np.ndarray]:
     """Heading on the grid for every agent from `source`."""
     if source is HeadingSource.TRUE:
         return [true_heading(a) for a in inputs.agents]
     if source is HeadingSource.VIDEO:
-        return [video_heading(inputs, a, rng) for a in inputs.agents]
+        return [video_heading(inputs, a, rng, video) for a in inputs.agents]
     return [sensor_heading(inputs, a) for a in inputs.agents]
 
 
-def _smooth(values: np.ndarray) -> np.ndarray:
-    kernel = np.ones(VIDEO_SMOOTHING_FRAMES) / VIDEO_SMOOTHING_FRAMES
-    padded = np.pad(values, VIDEO_SMOOTHING_FRAMES // 2, mode="edge")
+def _smooth(values: np.ndarray, frames: int) -> np.ndarray:
+    if frames <= 1:
+        return values
+    kernel = np.ones(frames) / frames
+    padded = np.pad(values, (frames // 2, frames - 1 - frames // 2), mode="edge")
     return np.convolve(padded, kernel, mode="valid")
 
 

@@ -77,7 +77,7 @@ def reception_from_truth(x_m: np.ndarray, y_m: np.ndarray, venue: Venue) -> np.n
     return zone
 
 
-def run_paper(inputs: EvalInputs, heading: list[np.ndarray], corrections: frozenset[str], venue: Venue,
+def run_paper(inputs: EvalInputs, heading: list[np.ndarray], corrections: frozenset[str], venue: Venue | None,
               zones: dict[str, np.ndarray], collisions: list[Collision], rng: np.random.Generator) -> Estimate:
     """Dead reckoning with the given heading, then the paper's corrections frame by frame.
 
@@ -96,7 +96,7 @@ def run_paper(inputs: EvalInputs, heading: list[np.ndarray], corrections: frozen
     beacon_kind = next((k for k in ("beacon", "beacon_zone") if k in corrections), None)
     collision_kind = next((k for k in ("collision", "collision_midpoint") if k in corrections), None)
     zone = zones[beacon_kind] if beacon_kind else None
-    goals = np.array([[b.x_m, b.y_m] for b in venue.beacons]).reshape(-1, 2)
+    goals = np.array([[b.x_m, b.y_m] for b in venue.beacons] if venue else []).reshape(-1, 2)
     index = {agent.agent.id: a for a, agent in enumerate(inputs.agents)}
     at_frame: dict[int, list[Collision]] = {}
     if collision_kind:
