@@ -116,6 +116,9 @@ def write_plot(calibration: Calibration, path: Path) -> Path:
         for curve in curves:
             ax.plot(calibration.frame_s, curve, color=colour, lw=0.6, alpha=0.45)
         ax.plot(calibration.frame_s, curves.mean(axis=0), color=colour, lw=2.2, label=f"heading {name} (mean of seeds)")
+    for name, style in zip([v for v in VARIANTS if v.startswith("video,")], ("--", "-.", ":")):
+        curves = np.array([r.curve_m[:n] for r in calibration.rows if r.variant == name])
+        ax.plot(calibration.frame_s, curves.mean(axis=0), color="tab:blue", lw=1.4, ls=style, label=f"what if: {name}")
     for t, value in ((120.0, PAPER_AT_120S_M), (317.0, PAPER_MAX_M)):
         ax.errorbar([t], [value], yerr=[[value * BAND], [value * BAND]], fmt="k*", ms=12, capsize=5)
     ax.plot([], [], "k*", ms=10, label="paper, video heading (+-25 %)")

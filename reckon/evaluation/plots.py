@@ -26,7 +26,8 @@ def write_plots(report: EvalReport, folder: Path, court_m: tuple[float, float]) 
 
 def _errors(report: EvalReport, path: Path) -> Path:
     headings = sorted({row.heading for row in report.rows}, key=["true", "video", "sensors"].index)
-    fig, axes = plt.subplots(1, len(headings), figsize=(5.5 * len(headings), 4.2), sharey=True, squeeze=False)
+    # each heading its own scale: the magnetometer's error is tens of times the others'
+    fig, axes = plt.subplots(1, len(headings), figsize=(5.5 * len(headings), 4.2), squeeze=False)
     for ax, heading in zip(axes[0], headings):
         for row in report.rows:
             if row.heading == heading:
@@ -35,13 +36,17 @@ def _errors(report: EvalReport, path: Path) -> Path:
         ax.axhline(PAPER_BEACON_MAX_M, color="k", ls=":", lw=1, label="paper beacon max 2.8 m")
         ax.set_title(f"paper's method, heading: {heading}")
         ax.set_xlabel("time (s)")
+        ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("team-mean position error (m)")
-    axes[0][-1].legend(fontsize=7, loc="upper left")
+        ax.set_ylabel("team-mean position error (m)")
+    axes[0][0].legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+TRAJECTORY_AGENTS = 3  # more chairs than this over a whole game is a tangle
 
 
 def _trajectories(report: EvalReport, path: Path, court_m: tuple[float, float]) -> Path:
@@ -51,15 +56,15 @@ def _trajectories(report: EvalReport, path: Path, court_m: tuple[float, float]) 
     for ax, row in zip(axes[0], rows):
         ax.add_patch(plt.Rectangle((0, 0), *court_m, fill=False, lw=1.5))
         ax.axvline(court_m[0] / 2, color="grey", lw=0.8)
-        for a, agent in enumerate(report.agent_ids):
+        for a, agent in enumerate(report.agent_ids[:TRAJECTORY_AGENTS]):
             c = colours[a % 10]
-            ax.plot(report.truth_x_m[a], report.truth_y_m[a], color=c, lw=0.6, alpha=0.5)
-            ax.plot(row.x_m[a], row.y_m[a], color=c, lw=0.9, ls="--", label=agent if a < 10 else None)
+            ax.plot(report.truth_x_m[a], report.truth_y_m[a], color=c, lw=0.7, alpha=0.6)
+            ax.plot(row.x_m[a], row.y_m[a], color=c, lw=0.9, ls="--", label=agent)
         ax.set_aspect("equal")
-        ax.set_xlim(-4, court_m[0] + 4)
-        ax.set_ylim(-4, court_m[1] + 4)
-        ax.set_title(f"truth (solid) vs paper DR, heading {row.heading}, no corrections (dashed)")
-    axes[0][-1].legend(fontsize=6, ncol=2, loc="upper right")
+        ax.set_xlim(-6, court_m[0] + 6)
+        ax.set_ylim(-6, court_m[1] + 6)
+        ax.set_title(f"truth (solid) vs paper DR, heading {row.heading}, no corrections (dashed)", fontsize=9)
+    axes[0][-1].legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -1,0 +1,73 @@
+"""The `reckon` command end to end on short simulated sessions: outputs, plots, user errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from reckon.cli import main
+
+RESULT_KEYS = {"method", "heading", "corrections", "mean_error_m", "max_team_mean_error_m",
+               "worst_agent_mean_error_m", "final_team_mean_error_m"}
+
+
+@pytest.fixture(scope="module")
+def game(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cli") / "game.mcap"
+    assert main(["-q", "sim", "wheelchair", "--players", "4", "--duration", "40", "--seed", "3", "-o", str(path)]) == 0
+    return path
+
+
+def test_eval_json_has_every_heading_and_correction_set(game, capsys):
+    assert main(["-q", "eval", str(game), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    rows = report["results"]
+    assert {r["heading"] for r in rows} == {"true", "video", "sensors"}
+    assert {tuple(r["corrections"]) for r in rows} >= {(), ("beacon",), ("collision",), ("beacon", "collision"), ("video",)}
+    for row in rows:
+        assert RESULT_KEYS <= set(row)
+        assert row["method"] == "paper"
+        assert 0.0 <= row["mean_error_m"] <= row["max_team_mean_error_m"] + 1e-9
+    true_dr = next(r for r in rows if r["heading"] == "true" and not r["corrections"])
+    assert true_dr["max_team_mean_error_m"] < 3.0  # 40 s of wheel odometry with true heading stays close
+    assert [d["threshold_g"] for d in report["collision_detection"]] == [float(g) for g in range(4, 13)]
+    for d in report["collision_detection"]:
+        assert d["precision"] is None or 0.0 <= d["precision"] <= 1.0
+
+
+def test_eval_table_and_plots(game, tmp_path, capsys):
+    assert main(["-q", "eval", str(game), "--plots", str(tmp_path / "plots")]) == 0
+    out = capsys.readouterr().out
+    assert "beacon_zone+collision" in out and "precision" in out
+    for name in ("error_over_time.png", "trajectories.png", "collision_detection.png"):
+        assert (tmp_path / "plots" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_calibrate_reports_against_the_paper(tmp_path, capsys):
+    assert main(["-q", "calibrate", "--seeds", "2", "--players", "3", "--duration", "30", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "2.2 m at 120 s" in out and "video, clocks 0.5 s apart" in out
+    assert (tmp_path / "calibration.png").exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["eval", "missing.mcap"], "missing.mcap: no such file"),
+    (["sim", "wheelchair", "--duration", "5", "-o", "x.mcap", "--set", "sensors.gyro_bias=1"], "unknown key 'gyro_bias'"),
+    (["sim", "wheelchair", "--duration", "5", "-o", "x.mcap", "--set", "nonsense"], "expected key=value"),
+    (["import", "csv", "no-such-folder", "-o", "x.mcap"], "no-such-folder"),
+])
+def test_user_errors_are_one_line_not_a_traceback(argv, message, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["-q", *argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_console_script_runs(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "reckon.cli", "eval", str(tmp_path / "none.mcap")],
+                            capture_output=True, text=True)
+    assert result.returncode == 2
+    assert result.stderr.startswith("reckon: error:")
