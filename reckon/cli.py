@@ -200,11 +200,14 @@ def main(argv: list[str] | None = None) -> int:
     except ReckonError as error:
         print(f"reckon: error: {error}", file=sys.stderr)
         return 2
+    except OSError as error:  # a path the user gave that cannot be read or written
+        if isinstance(error, BrokenPipeError):  # `reckon eval ... | head`: the reader left
+            sys.stderr.close()
+            return 0
+        print(f"reckon: error: {error.filename or ''}: {error.strerror or error}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         return 130
-    except BrokenPipeError:  # `reckon eval ... | head`: the reader left; not an error
-        sys.stderr.close()
-        return 0
 
 
 if __name__ == "__main__":
