@@ -52,23 +52,26 @@ class Collision:
     agent_b: str
 
 
-def pair_impacts(impacts: list[tuple[int, str]], window_s: float = PAIRING_WINDOW_S) -> list[Collision]:
-    """Collisions from (time_ns, agent) impacts of all chairs.
-
-    Impacts are grouped from the earliest one forward over `window_s`. A group of exactly two
-    chairs is a collision (at the first impact); a group of three or more chairs is ambiguous and
-    skipped, as the paper does; a lone chair is no collision.
-    """
+def group_impacts(impacts: list[tuple[int, str]], window_s: float = PAIRING_WINDOW_S) -> list[tuple[int, list[str]]]:
+    """Impacts grouped from the earliest one forward over `window_s`: (first time, sorted chairs)."""
     ordered = sorted(impacts)
     window_ns = int(window_s * 1e9)
-    collisions = []
+    groups = []
     start = 0
     while start < len(ordered):
         end = start
         while end + 1 < len(ordered) and ordered[end + 1][0] - ordered[start][0] <= window_ns:
             end += 1
-        agents = sorted({agent for _, agent in ordered[start:end + 1]})
-        if len(agents) == 2:
-            collisions.append(Collision(ordered[start][0], agents[0], agents[1]))
+        groups.append((ordered[start][0], sorted({agent for _, agent in ordered[start:end + 1]})))
         start = end + 1
-    return collisions
+    return groups
+
+
+def pair_impacts(impacts: list[tuple[int, str]], window_s: float = PAIRING_WINDOW_S) -> list[Collision]:
+    """Collisions from (time_ns, agent) impacts of all chairs.
+
+    A group (`group_impacts`) of exactly two chairs is a collision (at the first impact); a group
+    of three or more chairs is ambiguous and skipped, as the paper does; a lone chair is none.
+    """
+    return [Collision(time_ns, agents[0], agents[1]) for time_ns, agents in group_impacts(impacts, window_s)
+            if len(agents) == 2]

@@ -16,6 +16,7 @@ from __future__ import annotations
 import enum
 from typing import Any
 
+import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 SCHEMA_VERSION = 1
@@ -175,3 +176,15 @@ def new(name: str, **fields: Any) -> Any:
 def type_name(message: Any) -> str:
     """Short message name (`ImuBatch`) of a message instance."""
     return str(message.DESCRIPTOR.name)
+
+
+def imu_batch(agent_id: str, sensor_id: str, sequence: int, time_ns: np.ndarray, accel_g: np.ndarray,
+              gyro_dps: np.ndarray, mag_gauss: np.ndarray | None) -> Any:
+    """Build one ImuBatch from arrays (times int64 ns, xyz arrays N x 3)."""
+    offsets = time_ns - time_ns[0]
+    if len(offsets) and int(offsets[-1]) > 0xFFFFFFFF:
+        raise ValueError(f"batch spans {int(offsets[-1])} ns, more than the 4.29 s a uint32 offset holds")
+    return new(
+        "ImuBatch", timestamp_ns=int(time_ns[0]), agent_id=agent_id, sensor_id=sensor_id, sequence=sequence,
+        sample_offset_ns=offsets.astype(np.uint32).tolist(), accel_g=np.ravel(accel_g).tolist(),
+        gyro_dps=np.ravel(gyro_dps).tolist(), mag_gauss=[] if mag_gauss is None else np.ravel(mag_gauss).tolist())

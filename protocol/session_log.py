@@ -205,15 +205,3 @@ def _imu_series(agent_id: str, sensor_id: str, rows: list[Any]) -> ImuSeries:
     keep = order[np.concatenate([[True], np.diff(times[order]) > 0])]  # drop repeated samples
     return ImuSeries(agent_id, sensor_id, times[keep], accel[keep], gyro[keep],
                      None if mag is None else mag[keep], lost)
-
-
-def imu_batch(agent_id: str, sensor_id: str, sequence: int, time_ns: np.ndarray, accel_g: np.ndarray,
-              gyro_dps: np.ndarray, mag_gauss: np.ndarray | None) -> Any:
-    """Build one ImuBatch from arrays (times int64 ns, xyz arrays N x 3)."""
-    offsets = time_ns - time_ns[0]
-    if len(offsets) and int(offsets[-1]) > 0xFFFFFFFF:
-        raise ValueError(f"batch spans {int(offsets[-1])} ns, more than the 4.29 s a uint32 offset holds")
-    return messages.new(
-        "ImuBatch", timestamp_ns=int(time_ns[0]), agent_id=agent_id, sensor_id=sensor_id, sequence=sequence,
-        sample_offset_ns=offsets.astype(np.uint32).tolist(), accel_g=np.ravel(accel_g).tolist(),
-        gyro_dps=np.ravel(gyro_dps).tolist(), mag_gauss=[] if mag_gauss is None else np.ravel(mag_gauss).tolist())

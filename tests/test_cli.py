@@ -25,11 +25,15 @@ def test_eval_json_has_every_heading_and_correction_set(game, capsys):
     assert main(["-q", "eval", str(game), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     rows = report["results"]
-    assert {r["heading"] for r in rows} == {"true", "video", "sensors"}
-    assert {tuple(r["corrections"]) for r in rows} >= {(), ("beacon",), ("collision",), ("beacon", "collision"), ("video",)}
+    paper = [r for r in rows if r["method"] == "paper"]
+    ours = [r for r in rows if r["method"] == "reckon"]
+    assert {r["heading"] for r in paper} == {"true", "video", "sensors"}
+    assert {tuple(r["corrections"]) for r in paper} >= {(), ("beacon",), ("collision",), ("beacon", "collision"), ("video",)}
+    assert {(tuple(r["corrections"]), r["track"]) for r in ours} == {
+        (c, t) for c in ((), ("beacon",), ("collision",), ("beacon", "collision")) for t in ("live", "refined")}
+    assert len(paper) + len(ours) == len(rows)
     for row in rows:
         assert RESULT_KEYS <= set(row)
-        assert row["method"] == "paper"
         assert 0.0 <= row["mean_error_m"] <= row["max_team_mean_error_m"] + 1e-9
     true_dr = next(r for r in rows if r["heading"] == "true" and not r["corrections"])
     assert true_dr["max_team_mean_error_m"] < 3.0  # 40 s of wheel odometry with true heading stays close

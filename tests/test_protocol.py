@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 from protocol import keys, messages
 from protocol.errors import ConfigError, InputError
 from protocol.session import load_toml, session_from_dict, to_dict
-from protocol.session_log import SessionWriter, imu_batch, read_session
+from protocol.messages import imu_batch
+from protocol.session_log import SessionWriter, read_session
 
 SESSION = {
     "venue": {"name": "court", "beacons": [{"id": "goal-a", "x_m": 1.575, "y_m": 7.5}]},

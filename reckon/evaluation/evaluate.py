@@ -18,6 +18,7 @@ from reckon.evaluation.inputs import EvalInputs, build_inputs
 from reckon.evaluation.metrics import (DetectionScore, ErrorSummary, average_summaries, error_summary,
                                        score_collisions)
 from reckon.evaluation.paper_run import VIDEO_RUNS, reception_from_sightings, reception_from_truth, run_paper
+from reckon.evaluation.reckon_run import run_reckon
 
 log = logging.getLogger(__name__)
 
@@ -25,6 +26,7 @@ CORRECTION_SETS: tuple[tuple[str, ...], ...] = (
     (), ("beacon",), ("beacon_zone",), ("collision",), ("collision_midpoint",),
     ("beacon", "collision"), ("beacon_zone", "collision"), ("video",),
 )
+RECKON_CORRECTION_SETS: tuple[tuple[str, ...], ...] = ((), ("beacon",), ("collision",), ("beacon", "collision"))
 DETECTION_THRESHOLDS_G = tuple(float(g) for g in range(4, 13))  # the paper's Fig. 5 range
 
 
@@ -33,6 +35,7 @@ class ResultRow:
     method: str
     heading: str
     corrections: tuple[str, ...]
+    track: str | None  # ours: "live" or "refined"; the paper's method has one track
     summary: ErrorSummary
     corrections_applied: int
     team_curve_m: np.ndarray  # team-mean error per frame (first run for random fixes)
@@ -110,6 +113,15 @@ def evaluate_data(data: SessionData, path: Path, progress: Callable[[str], None]
                 if first is None:
                     first = (estimate, np.nanmean(error, axis=0))
             estimate, curve = first
-            report.rows.append(ResultRow("paper", source.value, corrections, average_summaries(summaries),
+            report.rows.append(ResultRow("paper", source.value, corrections, None, average_summaries(summaries),
                                          estimate.corrections_applied, curve, estimate.x_m, estimate.y_m))
+    if all(a.seat_gyro_dps is not None for a in inputs.agents):
+        for corrections in RECKON_CORRECTION_SETS:
+            progress(f"reckon, corrections {'+'.join(corrections) or 'none'}")
+            for track, estimate in zip(("live", "refined"),
+                                       run_reckon(inputs, frozenset(corrections), venue, data.sightings)):
+                error = np.hypot(estimate.x_m - truth_x, estimate.y_m - truth_y)
+                report.rows.append(ResultRow("reckon", HeadingSource.SENSORS.value, corrections, track,
+                                             error_summary(error, frame_s), estimate.corrections_applied,
+                                             np.nanmean(error, axis=0), estimate.x_m, estimate.y_m))
     return report

@@ -30,7 +30,9 @@ class AgentInputs:
     truth_heading_rad: np.ndarray | None  # unwrapped
     seat_time_ns: np.ndarray | None
     seat_accel_g: np.ndarray | None  # chair frame
+    seat_gyro_dps: np.ndarray | None  # chair frame
     seat_mag: np.ndarray | None  # chair frame, gauss
+    wheel_rotation_at_seat_deg: np.ndarray | None  # (N, 2) cumulative forward rotation, left, right, at seat times
 
     def start_pose(self) -> tuple[float, float, float]:
         """The known start pose: from truth where there is truth, else the session description."""
@@ -63,23 +65,26 @@ def build_inputs(data: SessionData) -> EvalInputs:
     grid = start + np.arange(0, end - start + 1, int(1e9 / GRID_HZ), dtype=np.int64)
     agents = []
     for agent in data.session.agents:
-        wheels = []
+        wheels, rotations = [], []
         for mount in (Mount.LEFT_WHEEL, Mount.RIGHT_WHEEL):
             sensor = agent.sensor(mount)
             series = data.imu.get(sensor.id) if sensor else None
             if series is None or len(series.time_ns) < 2:
                 raise InputError(f"agent {agent.id}: no {mount.value} samples; the paper's method needs both wheels")
             rotation = wheel_rotation_deg(series.time_ns, signed_axis(series.gyro_dps, sensor.spin_axis))
+            rotations.append((series.time_ns, rotation))
             wheels.append(travel_from_rotation_m(np.interp(grid, series.time_ns, rotation), agent.wheel_diameter_m))
         travel = np.diff(chair_travel_m(wheels[0], wheels[1]))
         seat = agent.sensor(Mount.SEAT)
         seat_series = data.imu.get(seat.id) if seat else None
-        seat_time = seat_accel = seat_mag = None
+        seat_time = seat_accel = seat_gyro = seat_mag = wheel_rotation = None
         if seat_series is not None and len(seat_series.time_ns):
             seat_time = seat_series.time_ns
             seat_accel = seat_to_chair(seat_series.accel_g, seat.forward_axis, seat.left_axis)
+            seat_gyro = seat_to_chair(seat_series.gyro_dps, seat.forward_axis, seat.left_axis)
             if seat_series.mag_gauss is not None:
                 seat_mag = seat_to_chair(seat_series.mag_gauss, seat.forward_axis, seat.left_axis)
+            wheel_rotation = np.stack([np.interp(seat_time, t, rotation) for t, rotation in rotations], axis=1)
         truth = data.truth.get(agent.id)
         tx = ty = th = None
         if truth is not None and len(truth.time_ns) >= 2:
@@ -87,5 +92,5 @@ def build_inputs(data: SessionData) -> EvalInputs:
             ty = np.interp(grid, truth.time_ns, truth.y_m)
             if np.all(np.isfinite(truth.heading_rad)):  # truth from a CSV may have positions only
                 th = np.interp(grid, truth.time_ns, np.unwrap(truth.heading_rad))
-        agents.append(AgentInputs(agent, travel, tx, ty, th, seat_time, seat_accel, seat_mag))
+        agents.append(AgentInputs(agent, travel, tx, ty, th, seat_time, seat_accel, seat_gyro, seat_mag, wheel_rotation))
     return EvalInputs(grid, agents)

@@ -31,7 +31,11 @@ def _errors(report: EvalReport, path: Path) -> Path:
     for ax, heading in zip(axes[0], headings):
         for row in report.rows:
             if row.heading == heading:
-                ax.plot(report.frame_s, row.team_curve_m, lw=1.2, label="+".join(row.corrections) or "none")
+                label = "+".join(row.corrections) or "none"
+                if row.track:
+                    label = f"reckon {row.track}: {label}"
+                ax.plot(report.frame_s, row.team_curve_m, lw=1.6 if row.track else 1.0,
+                        ls="-" if row.track else "--", label=label)
         ax.plot(*zip(*PAPER_DR_POINTS), "k*", ms=11, label="paper DR (video heading)")
         ax.axhline(PAPER_BEACON_MAX_M, color="k", ls=":", lw=1, label="paper beacon max 2.8 m")
         ax.set_title(f"paper's method, heading: {heading}")

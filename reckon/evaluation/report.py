@@ -17,6 +17,7 @@ def to_json(report: EvalReport) -> dict[str, Any]:
         "session": str(report.session_path),
         "results": [
             {"method": row.method, "heading": row.heading, "corrections": list(row.corrections),
+             **({"track": row.track} if row.track else {}),
              **{k: _round(v) for k, v in dataclasses.asdict(row.summary).items()},
              "corrections_applied": row.corrections_applied}
             for row in report.rows
@@ -33,11 +34,12 @@ def to_json(report: EvalReport) -> dict[str, Any]:
 def to_table(report: EvalReport) -> str:
     lines = [f"session {report.session_path}: {len(report.agent_ids)} agents, "
              f"{report.frame_s[-1]:.0f} s, errors per 10 fps frame",
-             f"{'method':7} {'heading':8} {'corrections':26} {'mean':>6} {'max team':>9} {'worst':>6} "
+             f"{'method':15} {'heading':8} {'corrections':26} {'mean':>6} {'max team':>9} {'worst':>6} "
              f"{'final':>6} {'@120s':>6} {'fixes':>6}"]
     for row in report.rows:
         s = row.summary
-        lines.append(f"{row.method:7} {row.heading:8} {'+'.join(row.corrections) or 'none':26} "
+        method = f"{row.method} {row.track}" if row.track else row.method
+        lines.append(f"{method:15} {row.heading:8} {'+'.join(row.corrections) or 'none':26} "
                      f"{s.mean_error_m:6.2f} {s.max_team_mean_error_m:9.2f} {s.worst_agent_mean_error_m:6.2f} "
                      f"{s.final_team_mean_error_m:6.2f} {s.team_mean_error_at_120s_m:6.2f} {row.corrections_applied:6d}")
     lines.append("errors in metres: mean over agents and time; max over time of the team mean (the paper's "

@@ -19,7 +19,8 @@ import numpy as np
 from protocol import keys, messages
 from protocol.errors import InputError
 from protocol.session import Session
-from protocol.session_log import SessionWriter, imu_batch
+from protocol.messages import imu_batch
+from protocol.session_log import SessionWriter
 from reckon.importers.report import SensorCount
 from reckon.importers.tables import ImuArrays
 

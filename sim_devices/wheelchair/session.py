@@ -25,7 +25,8 @@ import numpy as np
 from protocol import keys, messages
 from protocol.errors import ConfigError
 from protocol.session import Agent, Beacon, Mount, Sensor, Session, Venue
-from protocol.session_log import SessionWriter, imu_batch
+from protocol.messages import imu_batch
+from protocol.session_log import SessionWriter
 from sim_devices.wheelchair.devices import ImuStream, build_chairs, chair_streams, sensor_ids
 from sim_devices.wheelchair.impacts import Impact, contact_impacts, jolt_impacts
 from sim_devices.wheelchair.kinematics import ChairBuild

@@ -1,0 +1,194 @@
+"""Serial-port adapter: `serial://PORT?baud=115200` -> decoded frames.
+
+    with SerialSource("serial:///dev/ttyUSB0?baud=115200", Ximu3Decoder(), record_raw=log.write) as source:
+        for frame in source.iter_frames(stop_event):
+            ...
+
+URL: `serial://` + the port (`serial:///dev/ttyUSB0`, `serial://COM3`) + optional query keys
+`baud` (bits/s, default 115200; a USB x-IMU3 ignores it) and `read_timeout_s` (longest wait of
+one read, default 0.05 s: the stop event is checked that often). Other keys fail with ConfigError.
+
+Every byte read is handed to `record_raw` before it is decoded, so what the device sent is kept
+even when the decoder rejects it. Rejected frames are returned like the others (the caller may
+store them) and summarised in one WARNING per `warn_every_s` at most, never one per frame.
+
+A device that disappears (unplugged, Bluetooth link lost, pty closed) raises `DeviceDisconnected`
+from `read_frames`/`iter_frames`; the exception's `frames` carries what the failing read still
+decoded plus the partial message the decoder held (a TRUNCATED Rejected), all of it already given
+to `record_raw`. A port that cannot
+be opened raises `DeviceUnavailable`. Both are `protocol.errors.ReckonError`s (via `DeviceError`),
+so the CLI prints one line; a caller that wants to reconnect catches `DeviceDisconnected`.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter
+from typing import Any, Callable, Iterator, NoReturn, Protocol, Sequence
+from urllib.parse import parse_qs, urlsplit
+
+import serial
+
+from protocol.errors import ConfigError, ReckonError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_BAUD = 115_200
+DEFAULT_READ_TIMEOUT_S = 0.05
+READ_SIZE = 4096  # bytes asked of one read; a read returns what has arrived, up to this
+URL_KEYS = ("baud", "read_timeout_s")
+
+
+class DeviceError(ReckonError):
+    """A device source failed (base of the errors below)."""
+
+
+class DeviceUnavailable(DeviceError):
+    """The port cannot be opened (no such device, permission, busy)."""
+
+
+class DeviceDisconnected(DeviceError):
+    """The port failed while open: the device went away. `frames` holds what the last read still
+    decoded plus the partial message the decoder held (TRUNCATED), so nothing is lost."""
+
+    def __init__(self, message: str, frames: Sequence[Any] = ()):
+        super().__init__(message)
+        self.frames = list(frames)
+
+
+class Decoder(Protocol):
+    """What a source needs of a decoder (Ximu3Decoder, or any push-style decoder)."""
+
+    def feed(self, chunk: bytes) -> list[Any]: ...
+
+    def reset(self) -> list[Any]: ...
+
+
+def parse_serial_url(url: str) -> tuple[str, int, float]:
+    """`serial://PORT?baud=N&read_timeout_s=S` -> (port, baud, read_timeout_s). ConfigError on a
+    wrong scheme, an empty port, an unknown key or a bad value."""
+    parts = urlsplit(url)
+    if parts.scheme != "serial":
+        raise ConfigError(f"{url}: expected a serial:// URL")
+    port = parts.netloc + parts.path
+    if not port:
+        raise ConfigError(f"{url}: no port (e.g. serial:///dev/ttyUSB0)")
+    query = parse_qs(parts.query, keep_blank_values=True, strict_parsing=False)
+    for key in query:
+        if key not in URL_KEYS:
+            raise ConfigError(f"{url}: unknown key {key!r} (allowed: {', '.join(URL_KEYS)})")
+    baud = _number(url, query, "baud", DEFAULT_BAUD, int, 50, 20_000_000)
+    timeout_s = _number(url, query, "read_timeout_s", DEFAULT_READ_TIMEOUT_S, float, 0.001, 10.0)
+    return port, int(baud), float(timeout_s)
+
+
+def _number(url: str, query: dict[str, list[str]], key: str, default: float, kind: type, low: float,
+            high: float) -> float:
+    if key not in query:
+        return default
+    text = query[key][-1]
+    try:
+        value: float = kind(text)
+    except ValueError:
+        raise ConfigError(f"{url}: {key}={text!r} is not a number") from None
+    if not low <= value <= high:
+        raise ConfigError(f"{url}: {key}={value} is outside [{low}, {high}]")
+    return value
+
+
+class SerialSource:
+    """Reads a serial port and decodes it. Context manager; not thread-safe (one reader)."""
+
+    def __init__(self, url: str, decoder: Decoder, *, record_raw: Callable[[bytes], None] | None = None,
+                 warn_every_s: float = 5.0, clock: Callable[[], float] = time.monotonic):
+        self.url = url
+        self.port, self.baud, self.read_timeout_s = parse_serial_url(url)
+        self.decoder = decoder
+        self.record_raw = record_raw
+        self.warn_every_s = warn_every_s
+        self._clock = clock
+        self._serial: serial.Serial | None = None
+        self.bytes_read = 0
+        self.frames_read = 0
+        self._unreported: Counter[str] = Counter()
+        self._last_warning = clock()
+
+    def open(self) -> "SerialSource":
+        if self._serial is None:
+            try:
+                self._serial = serial.serial_for_url(self.port, baudrate=self.baud, timeout=self.read_timeout_s)
+            except (serial.SerialException, OSError, ValueError) as error:
+                raise DeviceUnavailable(f"{self.url}: cannot open {self.port} ({error})") from None
+        return self
+
+    def close(self) -> None:
+        if self._serial is not None:
+            self._serial.close()
+            self._serial = None
+        self._report(force=True)
+
+    def __enter__(self) -> "SerialSource":
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def read_frames(self) -> list[Any]:
+        """One read (waits at most read_timeout_s for the first byte) -> decoded frames, possibly
+        none. Raises DeviceDisconnected when the port fails."""
+        if self._serial is None:
+            raise DeviceError(f"{self.url}: read on a closed source")
+        chunk = b""
+        try:
+            # read(1) returns at the first byte (or the timeout); then take what else has arrived.
+            chunk = self._serial.read(1)
+            waiting = self._serial.in_waiting if chunk else 0
+            if waiting:
+                chunk += self._serial.read(min(waiting, READ_SIZE))
+        except (serial.SerialException, OSError) as error:
+            self._lost(error, self._decode(chunk))
+        return self._decode(chunk)
+
+    def iter_frames(self, stop: threading.Event) -> Iterator[Any]:
+        """Frames until `stop` is set (checked after every read, so within read_timeout_s)."""
+        while not stop.is_set():
+            yield from self.read_frames()
+
+    def _decode(self, chunk: bytes) -> list[Any]:
+        if not chunk:
+            self._report(force=False)
+            return []
+        self.bytes_read += len(chunk)
+        if self.record_raw is not None:
+            self.record_raw(chunk)  # before decoding: nothing the device sent is lost
+        frames = self.decoder.feed(chunk)
+        self.frames_read += len(frames)
+        self._count_rejected(frames)
+        self._report(force=False)
+        return frames
+
+    def _lost(self, error: BaseException, last_frames: list[Any]) -> NoReturn:
+        dropped = self.decoder.reset()
+        self._count_rejected(dropped)
+        self._report(force=True)
+        raise DeviceDisconnected(f"{self.url}: device disconnected after {self.bytes_read} bytes ({error})",
+                                 last_frames + dropped) from None
+
+    def _count_rejected(self, frames: list[Any]) -> None:
+        for frame in frames:
+            reason = getattr(frame, "reason", None)
+            if reason is not None:
+                self._unreported[getattr(reason, "value", str(reason))] += 1
+
+    def _report(self, force: bool) -> None:
+        now = self._clock()
+        if not self._unreported or (not force and now - self._last_warning < self.warn_every_s):
+            return
+        total = sum(self._unreported.values())
+        reasons = ", ".join(f"{reason} {count}" for reason, count in self._unreported.most_common())
+        log.warning("%s: %d rejected frames in the last %.1f s (%s); %d bytes read in all",
+                    self.url, total, now - self._last_warning, reasons, self.bytes_read)
+        self._unreported.clear()
+        self._last_warning = now
