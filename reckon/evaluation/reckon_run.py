@@ -17,14 +17,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from edge.chair_estimator import (HEADING, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState,
+from edge.chair_estimator import (BIAS, GYRO_SCALE, HEADING, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState,
                                   position_update, start, step)
 from edge.impacts import detect_impacts
 from hub.chair_corrections import CONTACT_DISTANCE_M, CONTACT_SD_M, beacon_fix, contact_update
 from hub.paper_rules import group_impacts
 from protocol.session import Venue
 from protocol.session_log import Sightings
-from reckon.evaluation.inputs import AgentInputs, EvalInputs
+from reckon.evaluation.inputs import FRAME_HZ, AgentInputs, EvalInputs
 
 RECKON_CORRECTIONS = ("beacon", "collision")
 IMPACT_THRESHOLD_G = 6.0  # lower than the paper's 8 g: the gate, not the threshold, rejects false pairs
@@ -88,12 +88,22 @@ class AgentTrack:
 
 
 def _frame_jacobian(before: np.ndarray, after: np.ndarray) -> np.ndarray:
-    """Jacobian of one frame's motion: heading errors rotate the displacement, scale stretches it."""
+    """Jacobian of one frame's motion (state after vs state before), linearised over the frame.
+
+    A heading error rotates the frame's displacement; the gyro bias and scale errors act through
+    the heading, on average over the frame; the wheel scale stretches the displacement.
+    """
     jacobian = np.eye(N)
     dx, dy = after[X] - before[X], after[Y] - before[Y]
     jacobian[X, HEADING], jacobian[Y, HEADING] = -dy, dx
     if before[SCALE] != 0.0:
         jacobian[X, SCALE], jacobian[Y, SCALE] = dx / before[SCALE], dy / before[SCALE]
+    turn = after[HEADING] - before[HEADING]
+    jacobian[HEADING, BIAS] = -1.0 / FRAME_HZ
+    jacobian[HEADING, GYRO_SCALE] = turn / (1.0 + before[GYRO_SCALE])
+    for column in (BIAS, GYRO_SCALE):
+        jacobian[X, column] = -dy * 0.5 * jacobian[HEADING, column]
+        jacobian[Y, column] = dx * 0.5 * jacobian[HEADING, column]
     return jacobian
 
 
