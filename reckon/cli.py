@@ -123,6 +123,49 @@ def run_calibrate(args: argparse.Namespace, progress: Callable[[str], None]) -> 
     return 0
 
 
+def _bus_config(args: argparse.Namespace, default_role: str):
+    """Zenoh config from --listen/--connect; by default the embedded loopback endpoint."""
+    from reckon.bus import DEFAULT_ENDPOINT, zenoh_config
+
+    listen, connect = list(args.listen), list(args.connect)
+    if not listen and not connect:
+        (listen if default_role == "listen" else connect).append(DEFAULT_ENDPOINT)
+    return zenoh_config(mode=args.mode, listen=listen, connect=connect)
+
+
+def _stop_on_signals():
+    """An Event set by Ctrl-C or SIGTERM, so a recorder can finish its file."""
+    import signal
+    import threading
+
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    return stop
+
+
+def run_replay(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from reckon.replay import replay
+
+    summary = replay(Path(args.session), _bus_config(args, "connect"), speed=args.speed,
+                     progress=lambda state: progress(str(state)), wait_for=args.wait_for,
+                     wait_timeout_s=args.wait_timeout, stop=_stop_on_signals())
+    print(summary)
+    return 0
+
+
+def run_record(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from protocol.session import load_toml
+    from reckon.record import record
+
+    description = load_toml(Path(args.session)) if args.session else None
+    summary = record(_bus_config(args, "listen"), args.venue, Path(args.output), _stop_on_signals(),
+                     description=description, until_end=args.until_end,
+                     progress=lambda count: progress(f"recorded {count} messages"))
+    print(summary)
+    return 0
+
+
 def run_demo(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     """Offline demo: simulate a 10-chair game, evaluate the paper's method, print, plot."""
     out = Path(args.out)
@@ -171,6 +214,27 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     ev.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR")
     ev.set_defaults(run=run_eval)
+
+    def bus_options(command: argparse.ArgumentParser) -> None:
+        command.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7447")
+        command.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
+        command.add_argument("--mode", default="peer", choices=["peer", "client", "router"])
+
+    rep = sub.add_parser("replay", help="publish a session log over Zenoh as if its devices were live")
+    rep.add_argument("session")
+    rep.add_argument("--speed", type=float, default=1.0, help="times real time; 0 = as fast as the bus takes it")
+    rep.add_argument("--wait-for", type=int, default=0, metavar="N", help="wait for N hubs/recorders first")
+    rep.add_argument("--wait-timeout", type=float, default=60.0, metavar="S")
+    bus_options(rep)
+    rep.set_defaults(run=run_replay)
+
+    rec = sub.add_parser("record", help="record every message of a venue from Zenoh into a session log")
+    rec.add_argument("--venue", required=True)
+    rec.add_argument("-o", "--output", required=True)
+    rec.add_argument("--session", metavar="VENUE.toml", help="the session description, if no source announces it")
+    rec.add_argument("--until-end", action="store_true", help="stop when the source says the session is over")
+    bus_options(rec)
+    rec.set_defaults(run=run_record)
 
     cal = sub.add_parser("calibrate", help="the simulator against the paper's dead-reckoning curve, over seeds")
     cal.add_argument("--seeds", type=_seeds, default=[1, 2, 3, 4, 5], help="e.g. 1-5 (default) or 1,3")

@@ -75,3 +75,31 @@ def test_console_script_runs(tmp_path):
                             capture_output=True, text=True)
     assert result.returncode == 2
     assert result.stderr.startswith("reckon: error:")
+
+
+def test_replay_into_record_over_zenoh(game, tmp_path):
+    """`reckon record` in its own process, `reckon replay` here: the log comes back whole."""
+    import socket
+
+    from protocol.session_log import read_session
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        endpoint = f"tcp/127.0.0.1:{probe.getsockname()[1]}"
+    output = tmp_path / "recorded.mcap"
+    recorder = subprocess.Popen([sys.executable, "-m", "reckon.cli", "-q", "record", "--venue", "court",
+                                 "-o", str(output), "--until-end", "--listen", endpoint],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert main(["-q", "replay", str(game), "--speed", "0", "--wait-for", "1", "--wait-timeout", "60",
+                     "--connect", endpoint]) == 0
+        out, err = recorder.communicate(timeout=60)
+    finally:
+        recorder.kill()
+    assert recorder.returncode == 0, err
+    assert "end of session seen" in out
+    original, recorded = read_session(game), read_session(output)
+    assert recorded.session == original.session
+    for sensor, series in original.imu.items():
+        assert (recorded.imu[sensor].time_ns == series.time_ns).all()
+    assert len(recorded.contacts) == len(original.contacts)

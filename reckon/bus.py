@@ -1,0 +1,365 @@
+"""Zenoh I/O adapter: session config and lifetime, publishing, lossless subscriptions, ready signals.
+
+The wire format (payloads, encodings, control keys) is `protocol.bus`; this module only moves
+bytes. Rules it follows (field-notes.md, Zenoh section):
+
+- Explicit tcp endpoints, multicast and gossip scouting off: opening takes milliseconds and
+  works in containers. Default endpoint `tcp/127.0.0.1:7447` (Zenoh's usual port on loopback):
+  the hub and the recorder *listen* on it, edges and the replayer *connect* to it. A real venue
+  passes its own, e.g. listen `tcp/0.0.0.0:7447` on the hub, connect `tcp/<hub ip>:7447` on a Pi.
+- Every session is closed (`open_session` is a context manager): a subscriber left declared at
+  interpreter exit hangs it.
+- Measurements are never dropped: publishers use CongestionControl.BLOCK and a `Subscription`
+  moves samples from a Zenoh FIFO into a bounded `queue.Queue` on its own thread, blocking when
+  the queue is full. A slow consumer therefore slows the publisher down (back-pressure) instead
+  of losing data. Limit: Zenoh closes a link whose transmit queue stays blocked for
+  `transport.link.tx.queue.congestion_control.block.wait_before_close` (5 s by default), so a
+  consumer must not stall for seconds. Nothing here blocks inside a Zenoh callback.
+- Tests and start-up wait on ready signals (liveliness tokens, flush replies), never on sleep.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import re
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
+
+import zenoh
+
+from protocol import bus as wire
+from protocol.errors import ConfigError, ReckonError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+MODES = ("peer", "client", "router")
+_ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|unixsock-stream|ws)/\S+$")
+RETRY_INIT_MS = 250  # first reconnect after 250 ms (Zenoh's default 1 s): an edge started before
+RETRY_MAX_MS = 2000  # its hub joins within 2 s of the hub coming up (Zenoh's default 4 s)
+QUEUE_CAPACITY = 1024  # samples held between the Zenoh FIFO and the consumer (~1 MB of ImuBatch)
+FIFO_CAPACITY = 256  # Zenoh's default FIFO size
+POLL_S = 0.1  # how often a blocked hand-over re-checks whether the subscription is closing
+
+
+class BusError(ReckonError):
+    """A Zenoh session cannot be opened, or a peer did not show up in time."""
+
+
+def zenoh_config(mode: str = "peer", listen: Sequence[str] = (), connect: Sequence[str] = (),
+                 timestamping: bool = True) -> zenoh.Config:
+    """A Zenoh config with explicit endpoints and no scouting.
+
+    mode: `peer` (default; every process talks directly to the ones it connects to or accepts),
+      `client` (only through a router), `router` (relays for clients).
+    listen: endpoints to accept connections on, e.g. `tcp/127.0.0.1:7447` (hub, recorder).
+    connect: endpoints to dial, e.g. `tcp/127.0.0.1:7447` (edges, replayer); a peer that finds
+      nobody keeps retrying in the background (250 ms, doubling to 2 s).
+    timestamping: stamp every sample this session publishes with its hybrid logical clock, so a
+      subscriber sees when it left (`Received.source_ns`).
+    ConfigError when the mode is unknown, an endpoint is malformed, or there is no endpoint at
+    all (with scouting off such a session could never meet anyone).
+    """
+    if mode not in MODES:
+        raise ConfigError(f"zenoh mode {mode!r} is not one of {', '.join(MODES)}")
+    for where, endpoints in (("listen", listen), ("connect", connect)):
+        if isinstance(endpoints, str):
+            raise ConfigError(f"zenoh {where}: expected a list of endpoints, got the string {endpoints!r}")
+        for endpoint in endpoints:
+            if not _ENDPOINT.match(endpoint):
+                raise ConfigError(f"zenoh {where} endpoint {endpoint!r} is not <protocol>/<address>, "
+                                  f"e.g. {DEFAULT_ENDPOINT}")
+    if not listen and not connect:
+        raise ConfigError("zenoh config: no listen and no connect endpoint (scouting is off, so "
+                          f"give at least one, e.g. listen {DEFAULT_ENDPOINT})")
+    retry = {"period_init_ms": RETRY_INIT_MS, "period_max_ms": RETRY_MAX_MS, "period_increase_factor": 2}
+    document = {
+        "mode": mode,
+        "listen": {"endpoints": list(listen)},
+        "connect": {"endpoints": list(connect), "retry": retry},
+        "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+        "timestamping": {"enabled": bool(timestamping)},
+    }
+    return zenoh.Config.from_json5(json.dumps(document))
+
+
+@contextmanager
+def open_session(config: zenoh.Config) -> Iterator[zenoh.Session]:
+    """Open a Zenoh session and always close it. BusError if it cannot open (e.g. port in use)."""
+    try:
+        session = zenoh.open(config)
+    except zenoh.ZError as error:
+        raise BusError(f"cannot open zenoh session (listen {config.get_json('listen/endpoints')}, "
+                       f"connect {config.get_json('connect/endpoints')}): {error}") from None
+    try:
+        yield session
+    finally:
+        session.close()
+
+
+def source_ns(sample: zenoh.Sample) -> int | None:
+    """Publisher's clock at the put (ns since the Unix epoch), or None if it did not stamp."""
+    stamp = sample.timestamp
+    return None if stamp is None else int(stamp.get_time_as_ntp64().as_nanos())
+
+
+# ---------------------------------------------------------------------------------------------
+# Publishing
+
+
+class Publisher:
+    """Publish protocol messages on their keys: one Zenoh publisher per key, declared on first use.
+
+    Congestion control BLOCK: when the link is full `publish` waits rather than drops.
+    """
+
+    def __init__(self, session: zenoh.Session):
+        self._session = session
+        self._publishers: dict[str, tuple[zenoh.Publisher, str]] = {}
+        self.sent = 0
+
+    def publish(self, key: str, message: Any) -> None:
+        payload, encoding = wire.encode(message)
+        self.publish_bytes(key, payload, encoding)
+
+    def publish_bytes(self, key: str, payload: bytes, encoding: str) -> None:
+        """Publish an already-encoded payload (the replayer's path: no decode and re-encode)."""
+        entry = self._publishers.get(key)
+        if entry is None:
+            try:
+                publisher = self._session.declare_publisher(
+                    key, encoding=zenoh.Encoding(encoding), congestion_control=zenoh.CongestionControl.BLOCK)
+            except zenoh.ZError as error:
+                raise BusError(f"cannot publish on key {key!r}: {error}") from None
+            entry = self._publishers[key] = (publisher, encoding)
+        publisher, declared = entry
+        if encoding == declared:
+            publisher.put(payload)
+        else:  # a key that carries two message types: say which one this is
+            publisher.put(payload, encoding=zenoh.Encoding(encoding))
+        self.sent += 1
+
+    def close(self) -> None:
+        for publisher, _ in self._publishers.values():
+            publisher.undeclare()
+        self._publishers.clear()
+
+    def __enter__(self) -> "Publisher":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# Subscribing
+
+
+@dataclass(frozen=True, slots=True)
+class Received:
+    """One sample, copied out of Zenoh: bytes and strings only."""
+
+    key: str
+    payload: bytes
+    encoding: str
+    delete: bool  # a DELETE sample (e.g. the end-of-session marker), not a PUT
+    received_ns: int  # this process's wall clock when the sample left Zenoh's FIFO
+    source_ns: int | None  # the publisher's clock at the put, when it stamps samples
+
+    def decode(self) -> Any:
+        """The protocol message; InputError for a foreign encoding or bad bytes."""
+        return wire.decode(self.encoding, self.payload, where=self.key)
+
+
+@dataclass
+class SubscriptionStats:
+    received: int = 0  # samples taken out of Zenoh
+    delivered: int = 0  # samples handed to the consumer
+    full_waits: int = 0  # times the queue was full and the hand-over had to wait (back-pressure)
+    max_depth: int = 0  # deepest the queue has been
+    discarded: int = 0  # samples dropped because the subscription was closed before delivery
+
+
+_END = object()
+
+
+class Subscription:
+    """Samples of `selector`, oldest first, none dropped while the subscription is open.
+
+    A Zenoh FIFO handler (`fifo_capacity`) feeds a drain thread that copies each sample into a
+    `queue.Queue(capacity)`; when that queue is full the drain thread waits, the FIFO fills, and
+    Zenoh pushes back on the publisher. `get` returns the next sample, raises `queue.Empty` after
+    `timeout` seconds, and returns None once `undeclare` was called and everything received
+    before it has been delivered. `close` (also on leaving `with`) stops at once and discards
+    what was not delivered (counted in `stats.discarded`).
+    """
+
+    def __init__(self, session: zenoh.Session, selector: str, capacity: int = QUEUE_CAPACITY,
+                 fifo_capacity: int = FIFO_CAPACITY):
+        if capacity < 1 or fifo_capacity < 1:
+            raise ConfigError(f"subscription {selector!r}: capacity {capacity} and fifo_capacity "
+                              f"{fifo_capacity} must be at least 1")
+        self.selector = selector
+        self.stats = SubscriptionStats()
+        self._queue: queue.Queue[Any] = queue.Queue(maxsize=capacity)
+        self._closing = threading.Event()
+        self._ended = False
+        self._undeclared = False
+        try:
+            self._subscriber = session.declare_subscriber(selector, zenoh.handlers.FifoChannel(fifo_capacity))
+        except zenoh.ZError as error:
+            raise BusError(f"cannot subscribe to {selector!r}: {error}") from None
+        handler = self._subscriber.handler  # taken now: the attribute is gone after undeclare
+        self._thread = threading.Thread(target=self._drain, args=(handler,), daemon=True,
+                                        name=f"drain {selector}")
+        self._thread.start()
+
+    def _drain(self, handler: Any) -> None:
+        for sample in handler:  # ends when the subscriber is undeclared and its FIFO is empty
+            self.stats.received += 1
+            self._hand_over(Received(str(sample.key_expr), sample.payload.to_bytes(), str(sample.encoding),
+                                     sample.kind == zenoh.SampleKind.DELETE, time.time_ns(), source_ns(sample)))
+        self._hand_over(_END)
+
+    def _hand_over(self, item: Any) -> None:
+        if self._closing.is_set():
+            self.stats.discarded += int(item is not _END)
+            return
+        try:
+            self._queue.put_nowait(item)
+        except queue.Full:
+            self.stats.full_waits += 1
+            while True:  # wait for the consumer, but notice a close
+                if self._closing.is_set():
+                    self.stats.discarded += int(item is not _END)
+                    return
+                try:
+                    self._queue.put(item, timeout=POLL_S)
+                    break
+                except queue.Full:
+                    continue
+        self.stats.max_depth = max(self.stats.max_depth, self._queue.qsize())
+
+    def get(self, timeout: float | None = None) -> Received | None:
+        """Next sample; queue.Empty after `timeout` s; None when undeclared and fully delivered."""
+        if self._ended:
+            return None
+        item = self._queue.get(timeout=timeout)
+        if item is _END:
+            self._ended = True
+            return None
+        self.stats.delivered += 1
+        return item
+
+    def __iter__(self) -> Iterator[Received]:
+        while (item := self.get()) is not None:
+            yield item
+
+    def undeclare(self) -> None:
+        """Stop receiving; samples already received are still delivered, then `get` returns None."""
+        if not self._undeclared:
+            self._undeclared = True
+            self._subscriber.undeclare()
+
+    def close(self) -> None:
+        self._closing.set()  # from now on the drain thread discards instead of waiting
+        self.undeclare()
+        self._thread.join(timeout=5.0)
+        if self._thread.is_alive():
+            log.warning("subscription %s: drain thread did not stop within 5 s", self.selector)
+        while True:
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                break
+            self.stats.discarded += int(item is not _END)
+
+    def __enter__(self) -> "Subscription":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# Ready signals
+
+
+class Alive:
+    """This process is up: a liveliness token plus a queryable on the same key that answers at once.
+
+    The answer is a flush barrier for whoever asks (`flush`): it comes back only after every
+    sample the asker sent earlier on the same link has been handed to this process's handlers.
+    """
+
+    def __init__(self, session: zenoh.Session, venue: str, role: wire.Role, process_id: str | None = None):
+        self.key = wire.alive(venue, role, process_id or str(session.zid()))
+        # Replying from the callback is safe: the reply is one empty message, and zenoh-python runs
+        # Python callbacks on their own thread, not on Zenoh's network thread.
+        self._queryable = session.declare_queryable(self.key, self._answer)
+        self._token = session.liveliness().declare_token(self.key)
+
+    def _answer(self, query: zenoh.Query) -> None:
+        with query:  # leaving `with` sends the final reply at once
+            query.reply(self.key, b"")
+
+    def close(self) -> None:
+        self._token.undeclare()
+        self._queryable.undeclare()
+
+    def __enter__(self) -> "Alive":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def wait_for_peers(session: zenoh.Session, selector: str | Sequence[str], count: int,
+                   timeout_s: float | None) -> list[str]:
+    """Wait until `count` distinct liveliness tokens match `selector` (one or several); their keys.
+
+    Tokens already present count (history). A token that goes away stops counting. BusError after
+    `timeout_s` seconds (None: wait for ever) naming the selector and what was seen.
+    """
+    selectors = [selector] if isinstance(selector, str) else list(selector)
+    events: queue.Queue[tuple[str, bool]] = queue.Queue()  # unbounded: a few events per process
+
+    def on_event(sample: zenoh.Sample) -> None:  # never blocks: put on an unbounded queue
+        events.put((str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT))
+
+    subscribers = [session.liveliness().declare_subscriber(s, on_event, history=True) for s in selectors]
+    try:
+        present: set[str] = set()
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while len(present) < count:
+            remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
+            try:
+                key, up = events.get(timeout=remaining)
+            except queue.Empty:
+                raise BusError(f"waited {timeout_s:.1f} s for {count} live peer(s) on {', '.join(selectors)}; "
+                               f"saw {len(present)}: {', '.join(sorted(present)) or 'none'}") from None
+            if up:
+                present.add(key)
+            else:
+                present.discard(key)
+        return sorted(present)
+    finally:
+        for subscriber in subscribers:
+            subscriber.undeclare()
+
+
+def flush(session: zenoh.Session, selector: str, timeout_s: float) -> list[str]:
+    """Ask every `Alive` process matching `selector` for a flush barrier; keys of those that answered.
+
+    When a key is in the answer, every sample this session published before the call has reached
+    that process. Call it before closing a publishing session: closing drops what is still queued.
+    """
+    replies = session.get(selector, target=zenoh.QueryTarget.ALL,
+                          consolidation=zenoh.ConsolidationMode.NONE, timeout=timeout_s)
+    return sorted(str(reply.ok.key_expr) for reply in replies if reply.ok is not None)
