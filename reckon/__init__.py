@@ -1,1 +1,1 @@
-"""The reckon application: one CLI, evaluation, importers."""
+"""The reckon application: the one CLI, importers, the Zenoh adapter (bus, replay, record), offline evaluation."""
