@@ -42,7 +42,7 @@ class Flag(enum.IntFlag):
     STILL = 1  # zero-rate update applied this step
     GAP = 2  # dt exceeded gap_s: the wheels bridged the turn
     BACKWARDS = 4  # timestamp not after the previous one: sample ignored
-    IMPACT = 8  # |a| - 1 g above impact_g: position variance inflated
+    IMPACT = 8  # |a| - 1 g rose above impact_g: position variance inflated once per impact
     MAG_USED = 16  # magnetometer update applied
     MAG_REJECTED = 32  # magnetometer disagreed beyond the gate
 
@@ -110,6 +110,7 @@ class ChairState:
     accel_mean_g: float
     gravity: tuple[float, float, float]  # unit vector, chair frame, measured while still
     flags: Flag
+    in_impact: bool  # the last sample was above impact_g (an impact spans several samples)
     travel_m: float  # total distance rolled (diagnostic)
     turn_xy: float  # running sums for the wheel-turn ratio: sum(gyro turn * wheel difference)
     turn_xx: float  # and sum(wheel difference^2), both with forgetting
@@ -138,7 +139,7 @@ def start(settings: ChairSettings, sample: ChairSample, x_m: float, y_m: float, 
     norm = math.sqrt(sum(a * a for a in sample.accel_g)) or 1.0
     return ChairState(sample.time_ns, np.array([x_m, y_m, heading_rad, 0.0, 1.0, 0.0, 0.0]), cov,
                       sample.yaw_rate_dps, 0.0, 0.0, 0.0, norm, tuple(a / norm for a in sample.accel_g), Flag.NONE,
-                      0.0, wheel_turn_ratio_prior(settings) * prior_weight, prior_weight, np.zeros((4, 4)), 0.0,
+                      False, 0.0, wheel_turn_ratio_prior(settings) * prior_weight, prior_weight, np.zeros((4, 4)), 0.0,
                       False, 0, 0.0)
 
 
@@ -203,7 +204,8 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
         jacobian[Y, column] = travel * c * 0.5 * d_turn
     along = (settings.along_track_sd_per_m * travel) ** 2
     across = (settings.cross_track_sd_per_m * travel) ** 2
-    if accel_norm - 1.0 > settings.impact_g:
+    in_impact = accel_norm - 1.0 > settings.impact_g
+    if in_impact and not state.in_impact:
         flags |= Flag.IMPACT
         along += settings.impact_shove_sd_m**2
         across += settings.impact_shove_sd_m**2
@@ -258,7 +260,7 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
                     flags |= Flag.MAG_REJECTED
                     mag_rejections += 1
     return ChairState(sample.time_ns, new_mean, new_cov, sample.yaw_rate_dps, left_bias, right_bias, still_s,
-                      accel_mean, gravity, flags, state.travel_m + abs(travel), turn_xy, turn_xy_weight, mag_fit,
+                      accel_mean, gravity, flags, in_impact, state.travel_m + abs(travel), turn_xy, turn_xy_weight, mag_fit,
                       mag_due, mag_ready, mag_rejections, mag_innovation)
 
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from edge.chair_estimator import (BIAS, GYRO_SCALE, HEADING, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState,
+from edge.chair_estimator import (BIAS, GYRO_SCALE, HEADING, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState,
                                   position_update, start, step)
 from edge.impacts import detect_impacts
 from hub.chair_corrections import CONTACT_DISTANCE_M, CONTACT_SD_M, beacon_fix, contact_update
@@ -108,11 +108,17 @@ def _frame_jacobian(before: np.ndarray, after: np.ndarray) -> np.ndarray:
 
 
 def rts_smooth(track: AgentTrack) -> np.ndarray:
-    """Smoothed means over frames (Rauch-Tung-Striebel, frame-level linearisation)."""
+    """Smoothed means over frames (Rauch-Tung-Striebel, frame-level linearisation).
+
+    North is left out: it is (re)initialised from the magnetometer fit, a jump no transition
+    explains, and positions do not depend on it.
+    """
+    kept = slice(0, NORTH)
     smoothed = track.post_mean.copy()
     for k in range(len(smoothed) - 2, -1, -1):
-        gain = track.post_cov[k] @ track.transition[k + 1].T @ np.linalg.pinv(track.prior_cov[k + 1])
-        smoothed[k] = track.post_mean[k] + gain @ (smoothed[k + 1] - track.prior_mean[k + 1])
+        transition = track.transition[k + 1][kept, kept]
+        gain = track.post_cov[k][kept, kept] @ transition.T @ np.linalg.pinv(track.prior_cov[k + 1][kept, kept])
+        smoothed[k, kept] = track.post_mean[k, kept] + gain @ (smoothed[k + 1, kept] - track.prior_mean[k + 1, kept])
     return smoothed
 
 
