@@ -99,6 +99,17 @@ class ChairSample:
 
 
 @dataclass(frozen=True)
+class MagAid:
+    """The magnetometer aid's own state: hard-iron fit and bookkeeping (fixed size)."""
+
+    fit: np.ndarray  # (4, 4) running moments [x, y, 1, x^2 + y^2] of the levelled field
+    due_s: float  # time until the next update
+    ready: bool  # north has been initialised from the fit
+    rejections: int  # consecutive gate rejections
+    innovation_deg: float  # last residual (diagnostic)
+
+
+@dataclass(frozen=True)
 class ChairState:
     time_ns: int
     mean: np.ndarray  # (7,)
@@ -114,11 +125,7 @@ class ChairState:
     travel_m: float  # total distance rolled (diagnostic)
     turn_xy: float  # running sums for the wheel-turn ratio: sum(gyro turn * wheel difference)
     turn_xx: float  # and sum(wheel difference^2), both with forgetting
-    mag_fit: np.ndarray  # (4, 4) running moments [x, y, 1, x^2 + y^2] of the levelled field
-    mag_due_s: float  # time until the next magnetometer update
-    mag_ready: bool  # north has been initialised from the fit
-    mag_rejections: int  # consecutive gate rejections
-    mag_innovation_deg: float  # last magnetometer residual (diagnostic)
+    mag: MagAid
 
 
 def wheel_turn_ratio_prior(settings: ChairSettings) -> float:
@@ -139,8 +146,8 @@ def start(settings: ChairSettings, sample: ChairSample, x_m: float, y_m: float, 
     norm = math.sqrt(sum(a * a for a in sample.accel_g)) or 1.0
     return ChairState(sample.time_ns, np.array([x_m, y_m, heading_rad, 0.0, 1.0, 0.0, 0.0]), cov,
                       sample.yaw_rate_dps, 0.0, 0.0, 0.0, norm, tuple(a / norm for a in sample.accel_g), Flag.NONE,
-                      False, 0.0, wheel_turn_ratio_prior(settings) * prior_weight, prior_weight, np.zeros((4, 4)), 0.0,
-                      False, 0, 0.0)
+                      False, 0.0, wheel_turn_ratio_prior(settings) * prior_weight, prior_weight,
+                      MagAid(np.zeros((4, 4)), 0.0, False, 0, 0.0))
 
 
 def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> ChairState:
@@ -193,75 +200,56 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
     new_mean[X] += travel * c
     new_mean[Y] += travel * s
     new_mean[HEADING] += turn
-    jacobian = np.eye(N)
-    jacobian[X, HEADING] = -travel * s
-    jacobian[Y, HEADING] = travel * c
-    jacobian[X, SCALE] = base_travel * c
-    jacobian[Y, SCALE] = base_travel * s
-    for column, d_turn in ((BIAS, d_turn_d_bias), (GYRO_SCALE, d_turn_d_scale)):
-        jacobian[HEADING, column] = d_turn
-        jacobian[X, column] = -travel * s * 0.5 * d_turn
-        jacobian[Y, column] = travel * c * 0.5 * d_turn
-    along = (settings.along_track_sd_per_m * travel) ** 2
-    across = (settings.cross_track_sd_per_m * travel) ** 2
     in_impact = accel_norm - 1.0 > settings.impact_g
-    if in_impact and not state.in_impact:
+    shove = in_impact and not state.in_impact  # once per impact, not per sample above the threshold
+    if shove:
         flags |= Flag.IMPACT
-        along += settings.impact_shove_sd_m**2
-        across += settings.impact_shove_sd_m**2
-    noise = np.zeros((N, N))
-    noise[X, X] = along * c * c + across * s * s
-    noise[Y, Y] = along * s * s + across * c * c
-    noise[X, Y] = noise[Y, X] = (along - across) * c * s
-    noise[HEADING, HEADING] = turn_var
-    noise[BIAS, BIAS] = (settings.gyro_bias_walk_dps_per_sqrt_s * DEG) ** 2 * dt
-    noise[SCALE, SCALE] = settings.wheel_scale_walk_per_sqrt_s**2 * dt
-    new_cov = jacobian @ cov @ jacobian.T + noise
+    new_cov = _propagate_covariance(settings, cov, c, s, travel, base_travel, d_turn_d_bias, d_turn_d_scale,
+                                    turn_var, shove, dt)
 
     if still:  # zero-rate update: the seat gyro reads its bias
         flags |= Flag.STILL
         new_mean, new_cov = _scalar_update(new_mean, new_cov, BIAS, 1.0, sample.yaw_rate_dps * DEG - new_mean[BIAS],
                                            (settings.still_rate_sd_dps * DEG) ** 2)
 
-    mag_fit, mag_due, mag_ready = state.mag_fit, state.mag_due_s - dt, state.mag_ready
-    mag_rejections, mag_innovation = state.mag_rejections, state.mag_innovation_deg
-    if sample.mag_gauss is not None and mag_due <= 0.0:
-        mag_due = settings.mag_period_s
-        horizontal = _level(sample.mag_gauss, gravity)
-        mag_fit = _fit_add(mag_fit, horizontal, math.exp(-settings.mag_period_s / settings.mag_fit_memory_s))
-        centre = _fit_centre(mag_fit, settings.mag_fit_min_spread, settings.mag_fit_min_points)
-        if centre is not None:
-            angle = math.atan2(horizontal[1] - centre[1], horizontal[0] - centre[0])  # = north - heading
-            if mag_rejections >= settings.mag_recover_rejections:
-                mag_ready, mag_rejections = False, 0
-            if not mag_ready:  # a sound fit: north from the current heading, with its uncertainty
-                # north = angle + heading: it inherits the heading's error and all its correlations
-                new_mean[NORTH] = angle + new_mean[HEADING]
-                new_cov = new_cov.copy()
-                new_cov[NORTH, :] = new_cov[HEADING, :]
-                new_cov[:, NORTH] = new_cov[:, HEADING]
-                new_cov[NORTH, NORTH] = new_cov[HEADING, HEADING] + (settings.mag_heading_sd_deg * DEG) ** 2
-                mag_ready = True
-            else:
-                innovation = _wrap(angle - (new_mean[NORTH] - new_mean[HEADING]))
-                h = np.zeros(N)
-                h[NORTH], h[HEADING] = 1.0, -1.0
-                # updates every mag_period_s share one disturbance for ~mag_correlation_s: de-weight them
-                repeat = max(settings.mag_correlation_s / settings.mag_period_s, 1.0)
-                variance = float(h @ new_cov @ h) + repeat * (settings.mag_heading_sd_deg * DEG) ** 2
-                mag_innovation = innovation / DEG
-                if innovation * innovation / variance <= settings.mag_gate_chi2:
-                    gain = new_cov @ h / variance
-                    new_mean = new_mean + gain * innovation
-                    new_cov = new_cov - np.outer(gain, h @ new_cov)
-                    flags |= Flag.MAG_USED
-                    mag_rejections = 0
-                else:
-                    flags |= Flag.MAG_REJECTED
-                    mag_rejections += 1
+    mag, new_mean, new_cov, mag_flags = _magnetometer(settings, state.mag, sample, gravity, new_mean, new_cov, dt)
     return ChairState(sample.time_ns, new_mean, new_cov, sample.yaw_rate_dps, left_bias, right_bias, still_s,
-                      accel_mean, gravity, flags, in_impact, state.travel_m + abs(travel), turn_xy, turn_xy_weight, mag_fit,
-                      mag_due, mag_ready, mag_rejections, mag_innovation)
+                      accel_mean, gravity, flags | mag_flags, in_impact, state.travel_m + abs(travel), turn_xy,
+                      turn_xy_weight, mag)
+
+
+def _magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, gravity: tuple[float, float, float],
+                  mean: np.ndarray, cov: np.ndarray, dt: float) -> tuple[MagAid, np.ndarray, np.ndarray, Flag]:
+    """Every `mag_period_s`: extend the hard-iron fit, then learn north or correct the heading."""
+    due = mag.due_s - dt
+    if sample.mag_gauss is None or due > 0.0:
+        return replace(mag, due_s=due), mean, cov, Flag.NONE
+    horizontal = _level(sample.mag_gauss, gravity)
+    fit = _fit_add(mag.fit, horizontal, math.exp(-settings.mag_period_s / settings.mag_fit_memory_s))
+    mag = replace(mag, fit=fit, due_s=settings.mag_period_s)
+    centre = _fit_centre(fit, settings.mag_fit_min_spread, settings.mag_fit_min_points)
+    if centre is None:
+        return mag, mean, cov, Flag.NONE
+    angle = math.atan2(horizontal[1] - centre[1], horizontal[0] - centre[0])  # = north - heading
+    if not mag.ready or mag.rejections >= settings.mag_recover_rejections:
+        # (re)learn north = angle + heading: it inherits the heading's error and all its correlations
+        mean, cov = mean.copy(), cov.copy()
+        mean[NORTH] = angle + mean[HEADING]
+        cov[NORTH, :] = cov[HEADING, :]
+        cov[:, NORTH] = cov[:, HEADING]
+        cov[NORTH, NORTH] = cov[HEADING, HEADING] + (settings.mag_heading_sd_deg * DEG) ** 2
+        return replace(mag, ready=True, rejections=0), mean, cov, Flag.NONE
+    innovation = _wrap(angle - (mean[NORTH] - mean[HEADING]))
+    h = np.zeros(N)
+    h[NORTH], h[HEADING] = 1.0, -1.0
+    # updates every mag_period_s share one disturbance for ~mag_correlation_s: de-weight them
+    repeat = max(settings.mag_correlation_s / settings.mag_period_s, 1.0)
+    variance = float(h @ cov @ h) + repeat * (settings.mag_heading_sd_deg * DEG) ** 2
+    mag = replace(mag, innovation_deg=innovation / DEG)
+    if innovation * innovation / variance > settings.mag_gate_chi2:
+        return replace(mag, rejections=mag.rejections + 1), mean, cov, Flag.MAG_REJECTED
+    gain = cov @ h / variance
+    return replace(mag, rejections=0), mean + gain * innovation, cov - np.outer(gain, h @ cov), Flag.MAG_USED
 
 
 def position_update(state: ChairState, measured_xy: np.ndarray, covariance: np.ndarray,
@@ -278,6 +266,34 @@ def position_update(state: ChairState, measured_xy: np.ndarray, covariance: np.n
     mean = state.mean + gain @ innovation
     cov = (np.eye(N) - gain @ h) @ state.cov
     return replace(state, mean=mean, cov=0.5 * (cov + cov.T)), True
+
+
+def _propagate_covariance(settings: ChairSettings, cov: np.ndarray, c: float, s: float, travel: float,
+                          base_travel: float, d_turn_d_bias: float, d_turn_d_scale: float, turn_var: float,
+                          shove: bool, dt: float) -> np.ndarray:
+    """P <- F P F^T + Q for one step; (c, s) = cos/sin of the mid-step heading."""
+    jacobian = np.eye(N)
+    jacobian[X, HEADING] = -travel * s
+    jacobian[Y, HEADING] = travel * c
+    jacobian[X, SCALE] = base_travel * c
+    jacobian[Y, SCALE] = base_travel * s
+    for column, d_turn in ((BIAS, d_turn_d_bias), (GYRO_SCALE, d_turn_d_scale)):
+        jacobian[HEADING, column] = d_turn
+        jacobian[X, column] = -travel * s * 0.5 * d_turn
+        jacobian[Y, column] = travel * c * 0.5 * d_turn
+    along = (settings.along_track_sd_per_m * travel) ** 2
+    across = (settings.cross_track_sd_per_m * travel) ** 2
+    if shove:
+        along += settings.impact_shove_sd_m**2
+        across += settings.impact_shove_sd_m**2
+    noise = np.zeros((N, N))
+    noise[X, X] = along * c * c + across * s * s
+    noise[Y, Y] = along * s * s + across * c * c
+    noise[X, Y] = noise[Y, X] = (along - across) * c * s
+    noise[HEADING, HEADING] = turn_var
+    noise[BIAS, BIAS] = (settings.gyro_bias_walk_dps_per_sqrt_s * DEG) ** 2 * dt
+    noise[SCALE, SCALE] = settings.wheel_scale_walk_per_sqrt_s**2 * dt
+    return jacobian @ cov @ jacobian.T + noise
 
 
 def _scalar_update(mean: np.ndarray, cov: np.ndarray, index: int, h: float, innovation: float,

@@ -128,7 +128,7 @@ def test_memory_does_not_grow_with_steps():
     after_many, _ = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     assert after_many - after_10 < 4096  # a few bytes of allocator noise, not growth
-    assert state.mean.shape == (7,) and state.cov.shape == (7, 7) and state.mag_fit.shape == (4, 4)
+    assert state.mean.shape == (7,) and state.cov.shape == (7, 7) and state.mag.fit.shape == (4, 4)
 
 
 def test_position_fix_is_gated():
