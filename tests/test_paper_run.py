@@ -20,7 +20,7 @@ def agent_moving_east(agent_id: str, speed_mps: float, scale: float = 1.0, y_m: 
     t = (GRID - GRID[0]) * 1e-9
     x = speed_mps * t
     travel = np.diff(x) * scale
-    return AgentInputs(Agent(agent_id), travel, x, np.full_like(t, y_m), np.zeros_like(t), None, None, None, None, None)
+    return AgentInputs(Agent(agent_id), travel, x, np.full_like(t, y_m), np.zeros_like(t), None, None, None, None, {})
 
 
 def inputs(*agents: AgentInputs) -> EvalInputs:

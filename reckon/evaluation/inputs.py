@@ -14,7 +14,7 @@ from edge.mounting import seat_to_chair, signed_axis
 from edge.wheel import chair_travel_m, travel_from_rotation_m, wheel_rotation_deg
 from protocol.errors import InputError
 from protocol.session import Agent, Mount
-from protocol.session_log import SessionData
+from protocol.session_log import ImuSeries, SessionData
 
 GRID_HZ = 200.0  # the paper's sensor rate
 FRAME_HZ = 10.0  # the paper's video frame rate: errors are scored per frame, as in the paper
@@ -32,7 +32,7 @@ class AgentInputs:
     seat_accel_g: np.ndarray | None  # chair frame
     seat_gyro_dps: np.ndarray | None  # chair frame
     seat_mag: np.ndarray | None  # chair frame, gauss
-    wheel_rotation_at_seat_deg: np.ndarray | None  # (N, 2) cumulative forward rotation, left, right, at seat times
+    raw: dict[str, ImuSeries]  # the agent's sensors as logged (sensor frame), for the live-path merger
 
     def start_pose(self) -> tuple[float, float, float]:
         """The known start pose: from truth where there is truth, else the session description."""
@@ -65,26 +65,24 @@ def build_inputs(data: SessionData) -> EvalInputs:
     grid = start + np.arange(0, end - start + 1, int(1e9 / GRID_HZ), dtype=np.int64)
     agents = []
     for agent in data.session.agents:
-        wheels, rotations = [], []
+        wheels = []
         for mount in (Mount.LEFT_WHEEL, Mount.RIGHT_WHEEL):
             sensor = agent.sensor(mount)
             series = data.imu.get(sensor.id) if sensor else None
             if series is None or len(series.time_ns) < 2:
                 raise InputError(f"agent {agent.id}: no {mount.value} samples; the paper's method needs both wheels")
             rotation = wheel_rotation_deg(series.time_ns, signed_axis(series.gyro_dps, sensor.spin_axis))
-            rotations.append((series.time_ns, rotation))
             wheels.append(travel_from_rotation_m(np.interp(grid, series.time_ns, rotation), agent.wheel_diameter_m))
         travel = np.diff(chair_travel_m(wheels[0], wheels[1]))
         seat = agent.sensor(Mount.SEAT)
         seat_series = data.imu.get(seat.id) if seat else None
-        seat_time = seat_accel = seat_gyro = seat_mag = wheel_rotation = None
+        seat_time = seat_accel = seat_gyro = seat_mag = None
         if seat_series is not None and len(seat_series.time_ns):
             seat_time = seat_series.time_ns
             seat_accel = seat_to_chair(seat_series.accel_g, seat.forward_axis, seat.left_axis)
             seat_gyro = seat_to_chair(seat_series.gyro_dps, seat.forward_axis, seat.left_axis)
             if seat_series.mag_gauss is not None:
                 seat_mag = seat_to_chair(seat_series.mag_gauss, seat.forward_axis, seat.left_axis)
-            wheel_rotation = np.stack([np.interp(seat_time, t, rotation) for t, rotation in rotations], axis=1)
         truth = data.truth.get(agent.id)
         tx = ty = th = None
         if truth is not None and len(truth.time_ns) >= 2:
@@ -92,5 +90,6 @@ def build_inputs(data: SessionData) -> EvalInputs:
             ty = np.interp(grid, truth.time_ns, truth.y_m)
             if np.all(np.isfinite(truth.heading_rad)):  # truth from a CSV may have positions only
                 th = np.interp(grid, truth.time_ns, np.unwrap(truth.heading_rad))
-        agents.append(AgentInputs(agent, travel, tx, ty, th, seat_time, seat_accel, seat_gyro, seat_mag, wheel_rotation))
+        agents.append(AgentInputs(agent, travel, tx, ty, th, seat_time, seat_accel, seat_gyro, seat_mag,
+                                  {s.id: data.imu[s.id] for s in agent.sensors if s.id in data.imu}))
     return EvalInputs(grid, agents)

@@ -19,6 +19,7 @@ import numpy as np
 
 from edge.chair_estimator import (BIAS, GYRO_SCALE, HEADING, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState,
                                   position_update, start, step)
+from edge.chair_merger import ChairMerger
 from edge.impacts import detect_impacts
 from hub.chair_corrections import CONTACT_DISTANCE_M, CONTACT_SD_M, beacon_fix, contact_update
 from hub.paper_rules import group_impacts
@@ -50,16 +51,12 @@ class PassFix:
 class AgentTrack:
     """One chair's filter, stepped up to each frame time; keeps what the smoother needs."""
 
-    def __init__(self, agent: AgentInputs, n_frames: int):
+    def __init__(self, agent: AgentInputs, samples: list[ChairSample], n_frames: int):
         self.agent = agent
         self.settings = ChairSettings(wheel_diameter_m=agent.agent.wheel_diameter_m, camber_deg=agent.agent.camber_deg)
-        self.times = agent.seat_time_ns
-        self.yaw = agent.seat_gyro_dps[:, 2]
-        self.rotation = np.diff(agent.wheel_rotation_at_seat_deg, axis=0, prepend=agent.wheel_rotation_at_seat_deg[:1])
-        self.accel = agent.seat_accel_g
-        self.mag = agent.seat_mag
+        self.samples = samples
         x0, y0, h0 = agent.start_pose()
-        self.state: ChairState = start(self.settings, self._sample(0), x0, y0, h0)
+        self.state: ChairState = start(self.settings, self.samples[0], x0, y0, h0)
         self.next = 1
         self.prior_mean = np.zeros((n_frames, N))
         self.prior_cov = np.zeros((n_frames, N, N))
@@ -67,16 +64,11 @@ class AgentTrack:
         self.post_cov = np.zeros((n_frames, N, N))
         self.transition = np.zeros((n_frames, N, N))
 
-    def _sample(self, i: int) -> ChairSample:
-        return ChairSample(int(self.times[i]), float(self.yaw[i]), float(self.rotation[i, 0]),
-                           float(self.rotation[i, 1]), tuple(self.accel[i].tolist()),
-                           None if self.mag is None else tuple(self.mag[i].tolist()))
-
     def advance(self, until_ns: int, frame: int) -> None:
         """Step through every sample up to `until_ns`; record the prior for frame `frame`."""
         start_mean = self.state.mean
-        while self.next < len(self.times) and self.times[self.next] <= until_ns:
-            self.state = step(self.settings, self.state, self._sample(self.next))
+        while self.next < len(self.samples) and self.samples[self.next].time_ns <= until_ns:
+            self.state = step(self.settings, self.state, self.samples[self.next])
             self.next += 1
         self.prior_mean[frame] = self.state.mean
         self.prior_cov[frame] = self.state.cov
@@ -85,6 +77,23 @@ class AgentTrack:
     def settle(self, frame: int) -> None:
         self.post_mean[frame] = self.state.mean
         self.post_cov[frame] = self.state.cov
+
+
+def merged_samples(agent: AgentInputs) -> list[ChairSample]:
+    """The agent's logged samples pushed through the live path's merger, in arrival (time) order."""
+    merger = ChairMerger(agent.agent)
+    streams = [(sensor_id, series) for sensor_id, series in agent.raw.items()]
+    times = np.concatenate([series.time_ns for _, series in streams])
+    which = np.concatenate([np.full(len(series.time_ns), i) for i, (_, series) in enumerate(streams)])
+    index = np.concatenate([np.arange(len(series.time_ns)) for _, series in streams])
+    samples: list[ChairSample] = []
+    for k in np.argsort(times, kind="stable"):
+        sensor_id, series = streams[which[k]]
+        i = index[k]
+        mag = None if series.mag_gauss is None else tuple(series.mag_gauss[i].tolist())
+        samples += merger.push(sensor_id, int(series.time_ns[i]), tuple(series.accel_g[i].tolist()),
+                               tuple(series.gyro_dps[i].tolist()), mag)
+    return samples + merger.flush()
 
 
 def _frame_jacobian(before: np.ndarray, after: np.ndarray) -> np.ndarray:
@@ -171,11 +180,15 @@ def _best_pair(tracks: dict[str, AgentTrack], agents: list[str]) -> tuple[str, s
     return best
 
 
-def run_reckon(inputs: EvalInputs, corrections: frozenset[str], venue: Venue,
-               sightings: dict[str, Sightings]) -> tuple[ReckonEstimate, ReckonEstimate]:
-    """(live, refined) estimates of every chair at every frame."""
+def run_reckon(inputs: EvalInputs, corrections: frozenset[str], venue: Venue, sightings: dict[str, Sightings],
+               samples: dict[str, list[ChairSample]] | None = None) -> tuple[ReckonEstimate, ReckonEstimate]:
+    """(live, refined) estimates of every chair at every frame.
+
+    `samples`: each agent's `merged_samples`, when the caller runs several correction sets.
+    """
     frame_ns = inputs.frame_ns
-    tracks = {agent.agent.id: AgentTrack(agent, len(frame_ns)) for agent in inputs.agents}
+    samples = samples or {agent.agent.id: merged_samples(agent) for agent in inputs.agents}
+    tracks = {agent.agent.id: AgentTrack(agent, samples[agent.agent.id], len(frame_ns)) for agent in inputs.agents}
     fixes_at: dict[int, list[tuple[str, PassFix]]] = {}
     if "beacon" in corrections:
         for agent_id in tracks:
