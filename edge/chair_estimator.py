@@ -72,6 +72,7 @@ class ChairSettings:
     camber_deg: float = 17.0  # likewise
     wheel_turn_memory_s: float = 60.0  # forgetting time of the wheel-turn ratio estimate
     wheel_turn_sd: float = 0.1  # heading uncertainty per radian bridged by the wheels (skid)
+    wheel_rate_limit_dps: float = 2000.0  # faster "rates" are a wheel catching up after lost packets
     mag_period_s: float = 0.5  # one magnetometer update per this (disturbance is spatially correlated)
     mag_heading_sd_deg: float = 12.0  # building disturbance (docs/simulator.md: ~9 deg RMS) + soft iron
     mag_correlation_s: float = 5.0  # the disturbance changes over metres: samples closer in time repeat it
@@ -189,9 +190,10 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
         turn_var = (settings.gyro_noise_dps_per_sqrt_hz * DEG) ** 2 * dt
         d_turn_d_bias = -(1.0 + mean[GYRO_SCALE]) * dt
         d_turn_d_scale = gyro_rate * dt
-        forget = math.exp(-dt / settings.wheel_turn_memory_s)
-        turn_xy = forget * turn_xy + turn * wheel_difference
-        turn_xy_weight = forget * turn_xy_weight + wheel_difference * wheel_difference
+        if max(abs(left_dps), abs(right_dps)) <= settings.wheel_rate_limit_dps:  # not a catch-up after a gap
+            forget = math.exp(-dt / settings.wheel_turn_memory_s)
+            turn_xy = forget * turn_xy + turn * wheel_difference
+            turn_xy_weight = forget * turn_xy_weight + wheel_difference * wheel_difference
 
     mid = mean[HEADING] + 0.5 * turn
     travel = mean[SCALE] * base_travel

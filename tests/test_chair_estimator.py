@@ -154,3 +154,11 @@ def test_contact_pulls_two_chairs_to_a_chair_width():
     separation = b2.mean[X] - a2.mean[X]
     assert 0.9 < separation < 2.0  # pulled towards 0.9 m, weighted by both covariances
     assert a2.mean[X] > 0.0 and b2.mean[X] < 2.0
+
+
+def test_a_wheel_catching_up_after_lost_packets_does_not_teach_the_turn_ratio():
+    state = run([sample(i) for i in range(0, 10)])
+    ratio = state.turn_xy / state.turn_xx
+    catch_up = sample(10, yaw_dps=0.0, left_deg=-250.0, right_deg=250.0)  # 100,000 deg/s: not a real rate
+    after = step(SETTINGS, state, catch_up)
+    assert after.turn_xy / after.turn_xx == pytest.approx(ratio)
