@@ -113,7 +113,8 @@ class SessionData:
         return max(ends) if ends else 0
 
 
-def _records(path: Path, problems: list[str]) -> Iterator[Any]:
+def iter_records(path: Path, problems: list[str]) -> Iterator[Any]:
+    """MCAP records in file order; at the first damaged or missing byte, a note in `problems` and stop."""
     try:
         reader = StreamReader(str(path), skip_magic=False)
         for record in reader.records:
@@ -123,7 +124,7 @@ def _records(path: Path, problems: list[str]) -> Iterator[Any]:
     except (McapError, ValueError, EOFError, OSError) as error:
         # StreamReader raises on the first damaged or missing byte; keep what came before.
         problems.append(f"{path}: log is damaged or truncated ({type(error).__name__}: {error}); "
-                        "kept every message before the damage")
+                        "every message before the damage is kept")
 
 
 def read_session(path: Path | str) -> SessionData:
@@ -138,7 +139,7 @@ def read_session(path: Path | str) -> SessionData:
     sighting_rows: dict[str, list[tuple[int, str, float]]] = defaultdict(list)
     contacts: list[Contact] = []
     skipped: dict[str, int] = defaultdict(int)
-    for record in _records(path, problems):
+    for record in iter_records(path, problems):
         if isinstance(record, Schema):
             schemas[record.id] = record.name
         elif isinstance(record, Channel):

@@ -31,14 +31,13 @@ import zenoh
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 
 from protocol import bus as wire
 from protocol import messages
 from protocol.errors import ConfigError, InputError
 from protocol.keys import ROOT
 from protocol.session import Session, session_from_dict
-from protocol.session_log import METADATA_NAME
+from protocol.session_log import METADATA_NAME, iter_records
 from reckon.bus import Publisher, flush, open_session, wait_for_peers
 
 log = logging.getLogger(__name__)
@@ -112,7 +111,7 @@ def replay(session_path: Path | str, config: zenoh.Config, speed: float = 1.0,
     report = progress or (lambda _: None)
     total = _message_count(path)
     problems: list[str] = []
-    records = _records(path, problems)
+    records = iter_records(path, problems)
     description = _description(path, records)
     venue = description.venue.name
     description_payload = wire.encode_session(description)
@@ -221,18 +220,6 @@ def _encoding(schema_name: str, message_encoding: str) -> str | None:
     if message_encoding != "protobuf" or short == schema_name or short not in messages.CLASSES:
         return None
     return wire.encoding_for(short)
-
-
-def _records(path: Path, problems: list[str]) -> Iterator[Any]:
-    """Records of the log in file order; stops at damage with a note in `problems`."""
-    try:
-        for record in StreamReader(str(path), skip_magic=False).records:
-            yield record
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except (McapError, ValueError, EOFError, OSError) as error:
-        problems.append(f"{path}: log is damaged or truncated ({type(error).__name__}: {error}); "
-                        "replayed every message before the damage")
 
 
 def _description(path: Path, records: Iterator[Any]) -> Session:
