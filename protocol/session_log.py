@@ -127,6 +127,22 @@ def iter_records(path: Path, problems: list[str]) -> Iterator[Any]:
                         "every message before the damage is kept")
 
 
+def read_description(path: Path | str) -> Session:
+    """Only the session description of a log (it precedes every message). InputError if absent."""
+    path = Path(path)
+    problems: list[str] = []
+    for record in iter_records(path, problems):
+        if isinstance(record, Metadata) and record.name == METADATA_NAME:
+            try:
+                return session_from_dict(json.loads(record.metadata["session_json"]), where=f"{path} metadata")
+            except (KeyError, json.JSONDecodeError) as error:
+                raise InputError(f"{path}: metadata {METADATA_NAME} is unreadable ({error})") from None
+        if isinstance(record, Message):
+            break
+    raise InputError(f"{path}: not a reckon session (no '{METADATA_NAME}' metadata before the first message"
+                     + (f"; {problems[0]}" if problems else "") + ")")
+
+
 def read_session(path: Path | str) -> SessionData:
     """Load a whole session log into numpy arrays. InputError if it is not a reckon session."""
     path = Path(path)

@@ -166,6 +166,18 @@ def run_record(args: argparse.Namespace, progress: Callable[[str], None]) -> int
     return 0
 
 
+def run_edge_command(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from reckon.edge_app import open_source, run_edge
+
+    stop = _stop_on_signals()
+    session, source = open_source(args.source, args.agent, args.speed, stop)
+    summary = run_edge(_bus_config(args, "connect"), session, args.agent, source, stop, pose_rate_hz=args.pose_rate,
+                       wait_for=args.wait_for, wait_timeout_s=args.wait_timeout,
+                       progress=lambda state: progress(str(state)))
+    print(summary)
+    return 0
+
+
 def run_demo(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     """Offline demo: simulate a 10-chair game, evaluate the paper's method, print, plot."""
     out = Path(args.out)
@@ -235,6 +247,16 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--until-end", action="store_true", help="stop when the source says the session is over")
     bus_options(rec)
     rec.set_defaults(run=run_record)
+
+    edge = sub.add_parser("edge", help="one chair's edge process: sensor messages in, poses out over Zenoh")
+    edge.add_argument("--agent", required=True)
+    edge.add_argument("--source", required=True, metavar="URL", help="mcap://SESSION.mcap (this agent's sensors)")
+    edge.add_argument("--speed", type=float, default=1.0, help="replay sources: times real time; 0 = as fast as possible")
+    edge.add_argument("--pose-rate", type=float, default=50.0, metavar="HZ", help="pose messages per second (default 50)")
+    edge.add_argument("--wait-for", type=int, default=0, metavar="N", help="wait for N hubs/recorders first")
+    edge.add_argument("--wait-timeout", type=float, default=60.0, metavar="S")
+    bus_options(edge)
+    edge.set_defaults(run=run_edge_command)
 
     cal = sub.add_parser("calibrate", help="the simulator against the paper's dead-reckoning curve, over seeds")
     cal.add_argument("--seeds", type=_seeds, default=[1, 2, 3, 4, 5], help="e.g. 1-5 (default) or 1,3")
