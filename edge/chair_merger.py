@@ -11,7 +11,9 @@ A seat sample waits until both wheels have reported past its time, but never mor
 (counted in `extrapolated`), and its rotation catches up when it reports again. The default
 wait (2 s) outlasts the simulator's bursts of lost packets (0.3 s on average, docs/simulator.md),
 so catch-ups are rare; the price is latency only while a wheel is silent. Samples not after their sensor's previous one are dropped and
-counted (`out_of_order`). Pending seat samples and each wheel's recent history are bounded.
+counted (`out_of_order`). Pending seat samples and each wheel's recent history are bounded: a
+seat stream more than `HISTORY` wheel samples (5 s) behind the wheels gets the oldest rotation
+kept, counted in `wheel_overrun` (live streams share one clock and never drift that far apart).
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ class WheelIntegrator:
         self.rotations: deque[float] = deque(maxlen=HISTORY)
         self.rate_dps = 0.0
         self.out_of_order = 0
+        self.overrun = 0  # lookups older than the history: the seat fell > HISTORY samples behind
 
     @property
     def newest_ns(self) -> int | None:
@@ -74,7 +77,8 @@ class WheelIntegrator:
         if time_ns >= self.times[-1]:
             return self.rotations[-1] + self.rate_dps * (time_ns - self.times[-1]) * 1e-9
         i = bisect.bisect_right(self.times, time_ns)
-        if i == 0:
+        if i == 0:  # before the wheel's first sample, or (history full) before what is kept
+            self.overrun += len(self.times) == self.times.maxlen
             return self.rotations[0]
         t0, t1 = self.times[i - 1], self.times[i]
         r0, r1 = self.rotations[i - 1], self.rotations[i]
@@ -85,6 +89,7 @@ class WheelIntegrator:
 class MergerCounters:
     samples: int = 0
     extrapolated: int = 0  # seat samples emitted before a wheel had reported past them
+    wheel_overrun: int = 0  # seat samples older than a wheel's kept history
     seat_out_of_order: int = 0
     wheel_out_of_order: dict[str, int] = field(default_factory=dict)
 
@@ -157,6 +162,7 @@ class ChairMerger:
             if not covered:
                 self.counters.extrapolated += 1
             rotation = {name: w.at(time_ns) for name, w in self.wheels.items()}
+            self.counters.wheel_overrun = sum(w.overrun for w in self.wheels.values())
             if self.last_seat_ns is None:  # the first sample only anchors the wheel integrals
                 increments = {"left": 0.0, "right": 0.0}
             else:

@@ -167,10 +167,11 @@ def run_record(args: argparse.Namespace, progress: Callable[[str], None]) -> int
 
 
 def run_edge_command(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
-    from reckon.edge_app import open_source, run_edge
+    from reckon.edge_app import open_sources, run_edge
 
     stop = _stop_on_signals()
-    session, source = open_source(args.source, args.agent, args.speed, stop)
+    session, source = open_sources(args.source, args.agent, args.speed, stop,
+                                   Path(args.venue) if args.venue else None)
     summary = run_edge(_bus_config(args, "connect"), session, args.agent, source, stop, pose_rate_hz=args.pose_rate,
                        wait_for=args.wait_for, wait_timeout_s=args.wait_timeout,
                        progress=lambda state: progress(str(state)))
@@ -250,7 +251,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     edge = sub.add_parser("edge", help="one chair's edge process: sensor messages in, poses out over Zenoh")
     edge.add_argument("--agent", required=True)
-    edge.add_argument("--source", required=True, metavar="URL", help="mcap://SESSION.mcap (this agent's sensors)")
+    edge.add_argument("--source", required=True, action="append", metavar="URL",
+                      help="mcap://SESSION.mcap (this agent's sensors), or SENSOR=serial://PORT?baud=N, once per sensor")
+    edge.add_argument("--venue", metavar="VENUE.toml", help="session description (needed with serial sources)")
     edge.add_argument("--speed", type=float, default=1.0, help="replay sources: times real time; 0 = as fast as possible")
     edge.add_argument("--pose-rate", type=float, default=50.0, metavar="HZ", help="pose messages per second (default 50)")
     edge.add_argument("--wait-for", type=int, default=0, metavar="N", help="wait for N hubs/recorders first")

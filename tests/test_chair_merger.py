@@ -103,3 +103,14 @@ def test_out_of_order_samples_are_dropped_and_counted():
 def test_missing_sensor_is_refused():
     with pytest.raises(ValueError, match="needs seat, left_wheel and right_wheel"):
         ChairMerger(Agent("chair02", sensors=(Sensor("seat", Mount.SEAT),)))
+
+
+def test_a_seat_far_behind_the_wheels_is_counted():
+    seat, left, right = streams(1500)
+    merger = ChairMerger(AGENT, max_wait_s=100.0)
+    for item in left + right:  # the wheels race 7.5 s ahead before the seat says anything
+        merger.push(*item)
+    for item in seat:
+        merger.push(*item)
+    merger.flush()
+    assert merger.counters.wheel_overrun > 0
