@@ -127,20 +127,30 @@ def iter_records(path: Path, problems: list[str]) -> Iterator[Any]:
                         "every message before the damage is kept")
 
 
-def read_description(path: Path | str) -> Session:
-    """Only the session description of a log (it precedes every message). InputError if absent."""
-    path = Path(path)
-    problems: list[str] = []
-    for record in iter_records(path, problems):
+def _parse_description(path: Path, record: Metadata) -> Session:
+    try:
+        return session_from_dict(json.loads(record.metadata["session_json"]), where=f"{path} metadata")
+    except (KeyError, json.JSONDecodeError) as error:
+        raise InputError(f"{path}: metadata {METADATA_NAME} is unreadable ({error})") from None
+
+
+def description_from_records(path: Path, records: Iterator[Any], problems: list[str] | None = None) -> Session:
+    """The session description from a record stream; it precedes every message (SessionWriter writes
+    it first), so the stream is consumed only up to it. InputError if a message comes first."""
+    for record in records:
         if isinstance(record, Metadata) and record.name == METADATA_NAME:
-            try:
-                return session_from_dict(json.loads(record.metadata["session_json"]), where=f"{path} metadata")
-            except (KeyError, json.JSONDecodeError) as error:
-                raise InputError(f"{path}: metadata {METADATA_NAME} is unreadable ({error})") from None
+            return _parse_description(path, record)
         if isinstance(record, Message):
             break
     raise InputError(f"{path}: not a reckon session (no '{METADATA_NAME}' metadata before the first message"
                      + (f"; {problems[0]}" if problems else "") + ")")
+
+
+def read_description(path: Path | str) -> Session:
+    """Only the session description of a log. InputError if absent."""
+    path = Path(path)
+    problems: list[str] = []
+    return description_from_records(path, iter_records(path, problems), problems)
 
 
 def read_session(path: Path | str) -> SessionData:
@@ -163,10 +173,7 @@ def read_session(path: Path | str) -> SessionData:
             short = name.removeprefix(messages.PACKAGE + ".")
             channels[record.id] = (record.topic, messages.CLASSES.get(short) if name.startswith(messages.PACKAGE) else None)
         elif isinstance(record, Metadata) and record.name == METADATA_NAME:
-            try:
-                session = session_from_dict(json.loads(record.metadata["session_json"]), where=f"{path} metadata")
-            except (KeyError, json.JSONDecodeError) as error:
-                raise InputError(f"{path}: metadata {METADATA_NAME} is unreadable ({error})") from None
+            session = _parse_description(path, record)
         elif isinstance(record, Message):
             topic, cls = channels.get(record.channel_id, ("?", None))
             if cls is None:

@@ -17,7 +17,6 @@ protobuf are skipped and counted. A truncated log replays up to the damage, with
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import threading
@@ -30,14 +29,13 @@ from typing import Any
 import zenoh
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Channel, Message, Metadata, Schema
+from mcap.records import Channel, Message, Schema
 
 from protocol import bus as wire
 from protocol import messages
 from protocol.errors import ConfigError, InputError
 from protocol.keys import ROOT
-from protocol.session import Session, session_from_dict
-from protocol.session_log import METADATA_NAME, iter_records
+from protocol.session_log import description_from_records, iter_records
 from reckon.bus import Publisher, flush, open_session, wait_for_peers
 
 log = logging.getLogger(__name__)
@@ -112,7 +110,7 @@ def replay(session_path: Path | str, config: zenoh.Config, speed: float = 1.0,
     total = _message_count(path)
     problems: list[str] = []
     records = iter_records(path, problems)
-    description = _description(path, records)
+    description = description_from_records(path, records)
     venue = description.venue.name
     description_payload = wire.encode_session(description)
     consumers: list[str] = []
@@ -220,19 +218,6 @@ def _encoding(schema_name: str, message_encoding: str) -> str | None:
     if message_encoding != "protobuf" or short == schema_name or short not in messages.CLASSES:
         return None
     return wire.encoding_for(short)
-
-
-def _description(path: Path, records: Iterator[Any]) -> Session:
-    """The session description; it precedes every message in a reckon log (SessionWriter writes it first)."""
-    for record in records:
-        if isinstance(record, Metadata) and record.name == METADATA_NAME:
-            try:
-                return session_from_dict(json.loads(record.metadata["session_json"]), where=f"{path} metadata")
-            except (KeyError, json.JSONDecodeError) as error:
-                raise InputError(f"{path}: metadata {METADATA_NAME} is unreadable ({error})") from None
-        if isinstance(record, Message):
-            break
-    raise InputError(f"{path}: not a reckon session (no '{METADATA_NAME}' metadata before the first message)")
 
 
 def _message_count(path: Path) -> int | None:

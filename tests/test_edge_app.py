@@ -35,33 +35,43 @@ def game(tmp_path_factory):
     return path
 
 
-def test_edge_publishes_the_same_poses_as_the_offline_path(game, tmp_path):
-    endpoint, output = free_endpoint(), tmp_path / "edge.mcap"
+def edge_into_recorder(game, agent_id: str, output):
+    """Run `run_edge` on one agent of `game` into a recorder on a fresh loopback endpoint."""
+    endpoint = free_endpoint()
     stop, ready = threading.Event(), threading.Event()
     session = read_session(game).session
     recorder = threading.Thread(target=record, args=(zenoh_config(listen=[endpoint]), "court", output, stop, ready),
                                 kwargs={"description": session}, daemon=True)
     recorder.start()
     assert ready.wait(WAIT_S)
-    source = mcap_source(game, "chair01", speed=0.0, stop=threading.Event())
-    summary = run_edge(zenoh_config(connect=[endpoint]), session, "chair01", source, threading.Event(), wait_for=1)
+    source = mcap_source(game, agent_id, speed=0.0, stop=threading.Event())
+    summary = run_edge(zenoh_config(connect=[endpoint]), session, agent_id, source, threading.Event(), wait_for=1)
     stop.set()
     recorder.join(WAIT_S)
     assert not recorder.is_alive()
+    return summary
 
-    # the offline path (reckon eval) on the same log reaches the same final pose
-    data = read_session(game)
-    agent = next(a for a in build_inputs(data).agents if a.agent.id == "chair01")
+
+def offline_run(game, agent_id: str):
+    """(sample count, final state) of the offline path (`reckon eval`) on the same log."""
+    agent = next(a for a in build_inputs(read_session(game)).agents if a.agent.id == agent_id)
     samples = merged_samples(agent)
     settings = ChairSettings(wheel_diameter_m=agent.agent.wheel_diameter_m, camber_deg=agent.agent.camber_deg)
     state = start(settings, samples[0], agent.agent.start_x_m, agent.agent.start_y_m, agent.agent.start_heading_rad)
     for sample in samples[1:]:
         state = step(settings, state, sample)
-    assert summary.samples == len(samples)
+    return len(samples), state
+
+
+def test_edge_publishes_the_same_poses_as_the_offline_path(game, tmp_path):
+    output = tmp_path / "edge.mcap"
+    summary = edge_into_recorder(game, "chair01", output)
+    count, state = offline_run(game, "chair01")
+    assert summary.samples == count
     np.testing.assert_allclose(summary.final_pose, state.mean[:3], atol=1e-6)
 
-    recorded = read_session(output)
-    assert set(recorded.imu) == {s.id for s in session.agent("chair01").sensors}  # raw data passed on
+    data, recorded = read_session(game), read_session(output)
+    assert set(recorded.imu) == {s.id for s in data.session.agent("chair01").sensors}  # raw data passed on
     truth = data.truth["chair01"]
     assert np.hypot(summary.final_pose[0] - truth.x_m[-1], summary.final_pose[1] - truth.y_m[-1]) < 3.0
     assert summary.poses >= 20 * 50 * 0.9  # 50 Hz
@@ -72,17 +82,8 @@ def test_poses_on_the_bus(game, tmp_path):
     from mcap.reader import make_reader
     from mcap_protobuf.decoder import DecoderFactory
 
-    endpoint, output = free_endpoint(), tmp_path / "poses.mcap"
-    stop, ready = threading.Event(), threading.Event()
-    session = read_session(game).session
-    recorder = threading.Thread(target=record, args=(zenoh_config(listen=[endpoint]), "court", output, stop, ready),
-                                kwargs={"description": session}, daemon=True)
-    recorder.start()
-    assert ready.wait(WAIT_S)
-    run_edge(zenoh_config(connect=[endpoint]), session, "chair02", mcap_source(game, "chair02", 0.0, threading.Event()),
-             threading.Event(), wait_for=1)
-    stop.set()
-    recorder.join(WAIT_S)
+    output = tmp_path / "poses.mcap"
+    edge_into_recorder(game, "chair02", output)
     with open(output, "rb") as f:
         poses = [m for _, c, _, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages()
                  if c.topic == "reckon/court/chair02/pose/edge"]
@@ -132,14 +133,8 @@ def test_three_serial_devices_on_ptys_through_the_edge(game):
     assert not edge.is_alive()
     summary = result["summary"]
 
-    data = read_session(game)
-    offline = next(a for a in build_inputs(data).agents if a.agent.id == "chair01")
-    samples = merged_samples(offline)
-    settings = ChairSettings(wheel_diameter_m=agent.wheel_diameter_m, camber_deg=agent.camber_deg)
-    state = start(settings, samples[0], agent.start_x_m, agent.start_y_m, agent.start_heading_rad)
-    for sample in samples[1:]:
-        state = step(settings, state, sample)
-    assert summary.samples == len(samples)  # every sample crossed the serial path
+    count, state = offline_run(game, "chair01")
+    assert summary.samples == count  # every sample crossed the serial path
     assert summary.wheel_overrun == 0
     # x-IMU3 carries microseconds and float32: the same path to within millimetres
     np.testing.assert_allclose(summary.final_pose[:2], state.mean[:2], atol=0.05)

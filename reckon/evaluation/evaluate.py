@@ -9,12 +9,12 @@ from typing import Callable
 
 import numpy as np
 
-from edge.impacts import PAPER_THRESHOLD_G, detect_impacts
+from edge.impacts import PAPER_THRESHOLD_G
 from hub.paper_rules import Collision, pair_impacts
 from protocol.errors import InputError
 from protocol.session_log import SessionData, read_session
 from reckon.evaluation.headings import HeadingSource, headings
-from reckon.evaluation.inputs import EvalInputs, build_inputs
+from reckon.evaluation.inputs import EvalInputs, agent_impacts, build_inputs
 from reckon.evaluation.metrics import (DetectionScore, ErrorSummary, average_summaries, error_summary,
                                        score_collisions)
 from reckon.evaluation.paper_run import VIDEO_RUNS, reception_from_sightings, reception_from_truth, run_paper
@@ -57,11 +57,7 @@ class EvalReport:
 
 
 def detect_collisions(inputs: EvalInputs, threshold_g: float) -> list[Collision]:
-    impacts = []
-    for agent in inputs.agents:
-        if agent.seat_accel_g is not None:
-            impacts += [(i.time_ns, agent.agent.id) for i in detect_impacts(agent.seat_time_ns, agent.seat_accel_g, threshold_g)]
-    return pair_impacts(impacts)
+    return pair_impacts(agent_impacts(inputs, threshold_g))
 
 
 def evaluate(path: Path, progress: Callable[[str], None] = lambda _: None) -> EvalReport:

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from edge.impacts import detect_impacts
 from edge.mounting import seat_to_chair, signed_axis
 from edge.wheel import chair_travel_m, travel_from_rotation_m, wheel_rotation_deg
 from protocol.errors import InputError
@@ -55,6 +56,15 @@ class EvalInputs:
     @property
     def frame_ns(self) -> np.ndarray:
         return self.grid_ns[self.frame_index]
+
+
+def agent_impacts(inputs: EvalInputs, threshold_g: float) -> list[tuple[int, str]]:
+    """(time_ns, agent) of every seat impact above `threshold_g`, over all agents."""
+    impacts = []
+    for agent in inputs.agents:
+        if agent.seat_accel_g is not None:
+            impacts += [(i.time_ns, agent.agent.id) for i in detect_impacts(agent.seat_time_ns, agent.seat_accel_g, threshold_g)]
+    return impacts
 
 
 def build_inputs(data: SessionData) -> EvalInputs:

@@ -20,12 +20,11 @@ import numpy as np
 from edge.chair_estimator import (BIAS, GYRO_SCALE, HEADING, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState,
                                   position_update, start, step)
 from edge.chair_merger import ChairMerger
-from edge.impacts import detect_impacts
 from hub.chair_corrections import CONTACT_DISTANCE_M, CONTACT_SD_M, beacon_fix, contact_update
 from hub.paper_rules import group_impacts
 from protocol.session import Venue
 from protocol.session_log import Sightings
-from reckon.evaluation.inputs import FRAME_HZ, AgentInputs, EvalInputs
+from reckon.evaluation.inputs import FRAME_HZ, AgentInputs, EvalInputs, agent_impacts
 
 RECKON_CORRECTIONS = ("beacon", "collision")
 IMPACT_THRESHOLD_G = 6.0  # lower than the paper's 8 g: the gate, not the threshold, rejects false pairs
@@ -155,12 +154,8 @@ def beacon_passes(frame_ns: np.ndarray, sightings: Sightings | None, venue: Venu
 
 
 def impact_groups(inputs: EvalInputs, frame_ns: np.ndarray) -> dict[int, list[list[str]]]:
-    impacts = []
-    for agent in inputs.agents:
-        impacts += [(i.time_ns, agent.agent.id) for i in
-                    detect_impacts(agent.seat_time_ns, agent.seat_accel_g, IMPACT_THRESHOLD_G)]
     groups: dict[int, list[list[str]]] = {}
-    for time_ns, agents in group_impacts(impacts):
+    for time_ns, agents in group_impacts(agent_impacts(inputs, IMPACT_THRESHOLD_G)):
         k = int(np.searchsorted(frame_ns, time_ns))
         if len(agents) >= 2 and k < len(frame_ns):
             groups.setdefault(k, []).append(agents)
