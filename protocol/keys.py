@@ -49,6 +49,11 @@ def correction(venue: str, agent: str) -> str:
     return f"{ROOT}/{venue}/{agent}/correction"
 
 
+def fix(venue: str, agent: str) -> str:
+    """Manual or video position fixes of one agent, into the hub."""
+    return f"{ROOT}/{venue}/{agent}/fix"
+
+
 def all_agents(venue: str, stream: str = "**") -> str:
     """Selector for one stream kind of every agent, e.g. `reckon/demo/*/imu/*`."""
     return f"{ROOT}/{venue}/*/{stream}"

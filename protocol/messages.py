@@ -79,6 +79,7 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("accel_g", "float", True),
         ("gyro_dps", "float", True),
         ("mag_gauss", "float", True),  # empty when the device has no magnetometer
+        ("received_ns", "int64", False),  # receiver's (venue host) clock at arrival; 0 = unknown
     ],
     "BeaconSighting": [
         ("schema_version", "uint32", False),
@@ -106,6 +107,7 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("covariance", "double", True),  # 3 x 3 row-major over (x m, y m, heading rad)
         ("method", "string", False),
         ("track", "Track", False),
+        ("correction_sequence", "uint32", False),  # the last Correction of this agent taken into account
     ],
     "ImpactEvent": [
         ("schema_version", "uint32", False),
@@ -114,6 +116,10 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("sensor_id", "string", False),
         ("peak_g", "float", False),  # peak of | |a| - 1 g |
     ],
+    # Hub -> edge: a measurement of where the agent was at timestamp_ns (venue clock), as an offset
+    # (dx, dy) from the pose the hub had for that time, with the measurement's covariance. The
+    # edge applies it to its current state as a Kalman update (heading and biases learn from it
+    # through their correlation with position); the hub has already gated it.
     "Correction": [
         ("schema_version", "uint32", False),
         ("timestamp_ns", "int64", False),
@@ -123,6 +129,20 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("dy_m", "double", False),
         ("other_agent_id", "string", False),  # the other chair of a collision
         ("source_id", "string", False),  # beacon id, camera id, operator
+        ("sequence", "uint32", False),  # per agent, from 1: poses say which they include
+        ("covariance", "double", True),  # 2 x 2 row-major (m^2) of the measurement (dx, dy)
+    ],
+    # An absolute position from outside the sensors (an operator, a video frame): the agent was
+    # at (x, y) at timestamp_ns (venue clock). The hub turns it into a Correction.
+    "PositionFix": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("kind", "CorrectionKind", False),
+        ("x_m", "double", False),
+        ("y_m", "double", False),
+        ("covariance", "double", True),  # 2 x 2 row-major (m^2)
+        ("source_id", "string", False),
     ],
     "TruthContact": [
         ("schema_version", "uint32", False),
@@ -166,6 +186,7 @@ EstimatedPose = CLASSES["EstimatedPose"]
 ImpactEvent = CLASSES["ImpactEvent"]
 Correction = CLASSES["Correction"]
 TruthContact = CLASSES["TruthContact"]
+PositionFix = CLASSES["PositionFix"]
 
 
 def new(name: str, **fields: Any) -> Any:

@@ -14,7 +14,7 @@ import logging
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 from mcap.exceptions import McapError
@@ -153,46 +153,69 @@ def read_description(path: Path | str) -> Session:
     return description_from_records(path, iter_records(path, problems), problems)
 
 
+class LogMessages:
+    """Iterate a session log's reckon messages as (log_time_ns, topic, message), in file order.
+
+    `session` is the description once its record has been read (it precedes every message);
+    `problems` notes damage (iteration stops there, keeping what came before); `skipped` counts
+    messages per topic that are not ours or come from a newer schema.
+    """
+
+    def __init__(self, path: Path | str, wanted: Callable[[str, str], bool] | None = None):
+        """`wanted(topic, type name)`: decode only the messages it accepts (the rest are not counted)."""
+        self.path = Path(path)
+        self.wanted = wanted
+        self.problems: list[str] = []
+        self.skipped: dict[str, int] = defaultdict(int)
+        self.session: Session | None = None
+
+    def __iter__(self) -> Iterator[tuple[int, str, Any]]:
+        schemas: dict[int, str] = {}
+        channels: dict[int, tuple[str, Any]] = {}
+        for record in iter_records(self.path, self.problems):
+            if isinstance(record, Schema):
+                schemas[record.id] = record.name
+            elif isinstance(record, Channel):
+                name = schemas.get(record.schema_id, "")
+                short = name.removeprefix(messages.PACKAGE + ".")
+                channels[record.id] = (record.topic, messages.CLASSES.get(short) if name.startswith(messages.PACKAGE) else None)
+            elif isinstance(record, Metadata) and record.name == METADATA_NAME:
+                self.session = _parse_description(self.path, record)
+            elif isinstance(record, Message):
+                topic, cls = channels.get(record.channel_id, ("?", None))
+                if cls is None:
+                    self.skipped[topic] += 1
+                    continue
+                if self.wanted is not None and not self.wanted(topic, cls.DESCRIPTOR.name):
+                    continue
+                msg = cls.FromString(record.data)
+                if msg.schema_version > messages.SCHEMA_VERSION:
+                    self.skipped[f"{topic} (schema_version {msg.schema_version} > {messages.SCHEMA_VERSION})"] += 1
+                    continue
+                yield record.log_time, topic, msg
+
+
 def read_session(path: Path | str) -> SessionData:
     """Load a whole session log into numpy arrays. InputError if it is not a reckon session."""
     path = Path(path)
-    problems: list[str] = []
-    schemas: dict[int, str] = {}
-    channels: dict[int, tuple[str, Any]] = {}
-    session: Session | None = None
+    log_messages = LogMessages(path)
+    problems = log_messages.problems
     batches: dict[str, list[Any]] = defaultdict(list)
     truth_rows: dict[str, list[tuple[int, float, float, float]]] = defaultdict(list)
     sighting_rows: dict[str, list[tuple[int, str, float]]] = defaultdict(list)
     contacts: list[Contact] = []
-    skipped: dict[str, int] = defaultdict(int)
-    for record in iter_records(path, problems):
-        if isinstance(record, Schema):
-            schemas[record.id] = record.name
-        elif isinstance(record, Channel):
-            name = schemas.get(record.schema_id, "")
-            short = name.removeprefix(messages.PACKAGE + ".")
-            channels[record.id] = (record.topic, messages.CLASSES.get(short) if name.startswith(messages.PACKAGE) else None)
-        elif isinstance(record, Metadata) and record.name == METADATA_NAME:
-            session = _parse_description(path, record)
-        elif isinstance(record, Message):
-            topic, cls = channels.get(record.channel_id, ("?", None))
-            if cls is None:
-                skipped[topic] += 1
-                continue
-            msg = cls.FromString(record.data)
-            if msg.schema_version > messages.SCHEMA_VERSION:
-                skipped[f"{topic} (schema_version {msg.schema_version} > {messages.SCHEMA_VERSION})"] += 1
-                continue
-            kind = msg.DESCRIPTOR.name
-            if kind == "ImuBatch":
-                batches[msg.sensor_id].append(msg)
-            elif kind == "TruthPose":
-                truth_rows[msg.agent_id].append((msg.timestamp_ns, msg.x_m, msg.y_m, msg.heading_rad))
-            elif kind == "BeaconSighting":
-                sighting_rows[msg.agent_id].append((msg.timestamp_ns, msg.beacon_id, msg.rssi_dbm))
-            elif kind == "TruthContact":
-                contacts.append(Contact(msg.timestamp_ns, msg.agent_id, msg.other_agent_id,
-                                        messages.ContactKind(msg.kind), msg.closing_speed_mps))
+    for _, _, msg in log_messages:
+        kind = msg.DESCRIPTOR.name
+        if kind == "ImuBatch":
+            batches[msg.sensor_id].append(msg)
+        elif kind == "TruthPose":
+            truth_rows[msg.agent_id].append((msg.timestamp_ns, msg.x_m, msg.y_m, msg.heading_rad))
+        elif kind == "BeaconSighting":
+            sighting_rows[msg.agent_id].append((msg.timestamp_ns, msg.beacon_id, msg.rssi_dbm))
+        elif kind == "TruthContact":
+            contacts.append(Contact(msg.timestamp_ns, msg.agent_id, msg.other_agent_id,
+                                    messages.ContactKind(msg.kind), msg.closing_speed_mps))
+    session, skipped = log_messages.session, log_messages.skipped
     if session is None:
         raise InputError(f"{path}: not a reckon session (no '{METADATA_NAME}' metadata record"
                          + (f"; {problems[0]}" if problems else "") + ")")

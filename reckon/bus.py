@@ -200,25 +200,32 @@ class Subscription:
     what was not delivered (counted in `stats.discarded`).
     """
 
-    def __init__(self, session: zenoh.Session, selector: str, capacity: int = QUEUE_CAPACITY,
+    def __init__(self, session: zenoh.Session, selector: str | Sequence[str], capacity: int = QUEUE_CAPACITY,
                  fifo_capacity: int = FIFO_CAPACITY):
-        if capacity < 1 or fifo_capacity < 1:
+        selectors = [selector] if isinstance(selector, str) else list(selector)
+        if capacity < 1 or fifo_capacity < 1 or not selectors:
             raise ConfigError(f"subscription {selector!r}: capacity {capacity} and fifo_capacity "
-                              f"{fifo_capacity} must be at least 1")
-        self.selector = selector
+                              f"{fifo_capacity} must be at least 1, and a selector is needed")
+        self.selector = ", ".join(selectors)
         self.stats = SubscriptionStats()
         self._queue: queue.Queue[Any] = queue.Queue(maxsize=capacity)
         self._closing = threading.Event()
         self._ended = False
+        self._running = len(selectors)  # drain threads still delivering
         self._undeclared = False
-        try:
-            self._subscriber = session.declare_subscriber(selector, zenoh.handlers.FifoChannel(fifo_capacity))
-        except zenoh.ZError as error:
-            raise BusError(f"cannot subscribe to {selector!r}: {error}") from None
-        handler = self._subscriber.handler  # taken now: the attribute is gone after undeclare
-        self._thread = threading.Thread(target=self._drain, args=(handler,), daemon=True,
-                                        name=f"drain {selector}")
-        self._thread.start()
+        self._subscribers, self._threads = [], []
+        for one in selectors:  # several selectors (a union) share the one queue, each with its drain thread
+            try:
+                subscriber = session.declare_subscriber(one, zenoh.handlers.FifoChannel(fifo_capacity))
+            except zenoh.ZError as error:
+                for declared in self._subscribers:
+                    declared.undeclare()
+                raise BusError(f"cannot subscribe to {one!r}: {error}") from None
+            self._subscribers.append(subscriber)
+            handler = subscriber.handler  # taken now: the attribute is gone after undeclare
+            self._threads.append(threading.Thread(target=self._drain, args=(handler,), daemon=True, name=f"drain {one}"))
+        for thread in self._threads:
+            thread.start()
 
     def _drain(self, handler: Any) -> None:
         for sample in handler:  # ends when the subscriber is undeclared and its FIFO is empty
@@ -250,10 +257,14 @@ class Subscription:
         """Next sample; queue.Empty after `timeout` s; None when undeclared and fully delivered."""
         if self._ended:
             return None
-        item = self._queue.get(timeout=timeout)
-        if item is _END:
-            self._ended = True
-            return None
+        while True:
+            item = self._queue.get(timeout=timeout)
+            if item is not _END:
+                break
+            self._running -= 1
+            if self._running == 0:
+                self._ended = True
+                return None
         self.stats.delivered += 1
         return item
 
@@ -265,14 +276,16 @@ class Subscription:
         """Stop receiving; samples already received are still delivered, then `get` returns None."""
         if not self._undeclared:
             self._undeclared = True
-            self._subscriber.undeclare()
+            for subscriber in self._subscribers:
+                subscriber.undeclare()
 
     def close(self) -> None:
         self._closing.set()  # from now on the drain thread discards instead of waiting
         self.undeclare()
-        self._thread.join(timeout=5.0)
-        if self._thread.is_alive():
-            log.warning("subscription %s: drain thread did not stop within 5 s", self.selector)
+        for thread in self._threads:
+            thread.join(timeout=5.0)
+            if thread.is_alive():
+                log.warning("subscription %s: drain thread did not stop within 5 s", self.selector)
         while True:
             try:
                 item = self._queue.get_nowait()

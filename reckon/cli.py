@@ -171,7 +171,7 @@ def run_edge_command(args: argparse.Namespace, progress: Callable[[str], None]) 
 
     stop = _stop_on_signals()
     session, source = open_sources(args.source, args.agent, args.speed, stop,
-                                   Path(args.venue) if args.venue else None)
+                                   Path(args.venue) if args.venue else None, start_at=args.start_at)
     summary = run_edge(_bus_config(args, "connect"), session, args.agent, source, stop, pose_rate_hz=args.pose_rate,
                        wait_for=args.wait_for, wait_timeout_s=args.wait_timeout,
                        progress=lambda state: progress(str(state)))
@@ -179,14 +179,44 @@ def run_edge_command(args: argparse.Namespace, progress: Callable[[str], None]) 
     return 0
 
 
+def run_hub_command(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from hub.chair_hub import HubSettings
+    from reckon.edge_app import session_description
+    from reckon.hub_app import run_hub
+
+    session = session_description(Path(args.venue))
+    try:
+        settings = HubSettings(lag_s=args.lag, pose_rate_hz=args.pose_rate,
+                               corrections=frozenset(args.corrections.split(",")) if args.corrections else frozenset())
+    except ValueError as error:
+        raise ReckonError(f"reckon hub: {error}") from None
+    summary = run_hub(_bus_config(args, "listen"), session, _stop_on_signals(), settings,
+                      Path(args.output) if args.output else None)
+    print(summary)
+    return 0
+
+
 def run_demo(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
-    """Offline demo: simulate a 10-chair game, evaluate the paper's method, print, plot."""
+    """Simulate a game, play it live through edges and the hub, score it; then the offline comparison."""
+    from reckon.demo import run_live
+
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     game = out / "game.mcap"
     sim_args = argparse.Namespace(players=args.players, duration=args.duration, seed=args.seed, output=game, set=[])
     print(f"simulating {args.players} chairs for {args.duration:.0f} s (seed {args.seed}) -> {game}", file=sys.stderr)
     run_sim(sim_args, progress)
+    print(f"\nlive: {args.players} edge processes and a hub over Zenoh on loopback, {args.speed:g} x real time",
+          file=sys.stderr)
+    result = run_live(game, out, args.speed, args.lag, lambda text: print(text + "\n", file=sys.stderr, flush=True))
+    corrections = {}
+    for kinds in result.corrections.values():
+        for kind, count in kinds.items():
+            corrections[kind] = corrections.get(kind, 0) + count
+    print(f"live pipeline ({result.game_s:.0f} s game in {result.wall_s:.0f} s wall, recorded in {out / 'hub.mcap'}): "
+          f"mean error live {result.mean_error_m['live']:.2f} m, refined {result.mean_error_m['refined']:.2f} m; "
+          f"corrections {', '.join(f'{k} {v}' for k, v in sorted(corrections.items())) or 'none'}")
+    print()
     eval_args = argparse.Namespace(session=game, json=False, plots=out / "plots")
     return run_eval(eval_args, progress)
 
@@ -255,11 +285,23 @@ def build_parser() -> argparse.ArgumentParser:
                       help="mcap://SESSION.mcap (this agent's sensors), or SENSOR=serial://PORT?baud=N, once per sensor")
     edge.add_argument("--venue", metavar="VENUE.toml", help="session description (needed with serial sources)")
     edge.add_argument("--speed", type=float, default=1.0, help="replay sources: times real time; 0 = as fast as possible")
+    edge.add_argument("--start-at", type=float, metavar="UNIX_S",
+                      help="replay sources: wall-clock time of the log's first message (keeps several edges in step)")
     edge.add_argument("--pose-rate", type=float, default=50.0, metavar="HZ", help="pose messages per second (default 50)")
     edge.add_argument("--wait-for", type=int, default=0, metavar="N", help="wait for N hubs/recorders first")
     edge.add_argument("--wait-timeout", type=float, default=60.0, metavar="S")
     bus_options(edge)
     edge.set_defaults(run=run_edge_command)
+
+    hub = sub.add_parser("hub", help="the venue's hub: every agent in, corrected poses and corrections out over Zenoh")
+    hub.add_argument("--venue", required=True, metavar="VENUE.toml", help="session description (or a session log)")
+    hub.add_argument("-o", "--output", metavar="FILE.mcap", help="record every input and output here")
+    hub.add_argument("--lag", type=float, default=5.0, metavar="S", help="refined track lag (default 5 s)")
+    hub.add_argument("--pose-rate", type=float, default=50.0, metavar="HZ", help="the edges' pose rate (default 50)")
+    hub.add_argument("--corrections", default="beacon,collision,fix",
+                     help="comma-separated: beacon, collision, fix (default all; empty for none)")
+    bus_options(hub)
+    hub.set_defaults(run=run_hub_command)
 
     cal = sub.add_parser("calibrate", help="the simulator against the paper's dead-reckoning curve, over seeds")
     cal.add_argument("--seeds", type=_seeds, default=[1, 2, 3, 4, 5], help="e.g. 1-5 (default) or 1,3")
@@ -275,6 +317,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--duration", type=float, default=317.0)
     demo.add_argument("--seed", type=int, default=1)
     demo.add_argument("--out", default="out/demo")
+    demo.add_argument("--speed", type=float, default=10.0, help="times real time (default 10)")
+    demo.add_argument("--lag", type=float, default=5.0, metavar="S", help="the hub's refined-track lag (default 5 s)")
     demo.set_defaults(run=run_demo)
     return parser
 

@@ -1,11 +1,14 @@
 """`reckon edge`: one chair's edge process. Sensor messages in, dead-reckoned poses out, over Zenoh.
 
-Source -> (raw messages published as they come: nothing received is lost) -> ChairMerger ->
-chair estimator -> EstimatedPose at `pose_rate_hz` on `reckon/<venue>/<agent>/pose/edge`, an
-ImpactEvent at once on `.../event/impact`. Sources: `mcap://FILE`, a session log replayed at
-`speed` x real time (the simulator's sessions, or a recording), or one x-IMU3 serial device per
-sensor (`SENSOR=serial://PORT?baud=N`, with `--venue VENUE.toml`); BLE will plug in the same way,
-as an iterable of protocol messages.
+Source -> (raw messages published as they come: nothing received is lost) -> ChairEdge
+(edge/chair_edge.py: merger and filter) -> EstimatedPose at `pose_rate_hz` on
+`reckon/<venue>/<agent>/pose/edge`, an ImpactEvent at once on `.../event/impact`. The hub's
+Correction messages for this agent (`.../correction`) are taken between batches and applied to
+the filter. Sources: `mcap://FILE`, a session log replayed at `speed` x real time (the
+simulator's sessions, or a recording), or one x-IMU3 serial device per sensor
+(`SENSOR=serial://PORT?baud=N`, with `--venue VENUE.toml`). Each raw batch carries the venue
+clock at its arrival (`received_ns`: the log time in a replay), from which the hub estimates
+the device's clock offset.
 """
 
 from __future__ import annotations
@@ -23,14 +26,13 @@ from urllib.parse import urlparse
 
 import zenoh
 
-from edge.chair_estimator import Flag, ChairSettings, start, step
-from edge.chair_merger import ChairMerger
+from edge.chair_edge import ChairEdge
 from protocol import bus as wire
 from protocol import keys, messages
 from protocol.errors import ConfigError
 from protocol.session import Session, load_toml
-from protocol.session_log import iter_records, read_description
-from reckon.bus import Alive, Publisher, flush, open_session, wait_for_peers
+from protocol.session_log import LogMessages, read_description
+from reckon.bus import Alive, Publisher, Subscription, flush, open_session, wait_for_peers
 
 log = logging.getLogger(__name__)
 FLUSH_TIMEOUT_S = 10.0
@@ -43,6 +45,7 @@ class EdgeSummary:
     samples: int = 0
     poses: int = 0
     impacts: int = 0
+    corrections: int = 0
     extrapolated: int = 0
     wheel_overrun: int = 0
     final_pose: tuple[float, float, float] | None = None
@@ -51,88 +54,104 @@ class EdgeSummary:
         pose = "none" if self.final_pose is None else "x %.2f m, y %.2f m, heading %.1f deg" % (
             self.final_pose[0], self.final_pose[1], math.degrees(self.final_pose[2]))
         return (f"edge {self.agent_id}: {self.messages_in} messages in, {self.samples} samples, "
-                f"{self.poses} poses and {self.impacts} impacts out ({self.extrapolated} samples with a wheel "
-                f"extrapolated, {self.wheel_overrun} behind the wheel history); last pose {pose}")
+                f"{self.poses} poses and {self.impacts} impacts out, {self.corrections} corrections applied "
+                f"({self.extrapolated} samples with a wheel extrapolated, {self.wheel_overrun} behind the wheel "
+                f"history); last pose {pose}")
 
 
-def mcap_source(path: Path, agent_id: str, speed: float, stop: threading.Event) -> Iterator[Any]:
-    """This agent's IMU batches and beacon sightings from a session log, paced by log time."""
-    problems: list[str] = []
-    schemas, channels = {}, {}
+def mcap_source(path: Path, agent_ids: str | set[str] | None, speed: float, stop: threading.Event,
+                start_at: float | None = None) -> Iterator[Any]:
+    """Agents' IMU batches and beacon sightings from a session log, paced by log time (speed 0: at once).
+
+    `agent_ids`: one agent, a set, or None for all. Each ImuBatch gets `received_ns` = its log time.
+    `start_at`: wall-clock time (time.time()) of the log's first message, so that several edges
+    replaying one log stay in step; default: now.
+    """
+    wanted = {agent_ids} if isinstance(agent_ids, str) else agent_ids
+
+    def accept(topic: str, name: str) -> bool:
+        if name not in ("ImuBatch", "BeaconSighting"):
+            return False
+        return wanted is None or keys.parse(topic)[1] in wanted
+
     first_log = first_wall = None
-    for record in iter_records(path, problems):
-        kind = type(record).__name__
-        if kind == "Schema":
-            schemas[record.id] = record.name.removeprefix(messages.PACKAGE + ".")
-        elif kind == "Channel":
-            channels[record.id] = (record.topic, schemas.get(record.schema_id))
-        elif kind == "Message":
-            topic, name = channels.get(record.channel_id, ("", None))
-            if name not in ("ImuBatch", "BeaconSighting") or keys.parse(topic)[1] != agent_id:
-                continue
-            if speed > 0:
-                first_log = record.log_time if first_log is None else first_log
-                first_wall = time.monotonic() if first_wall is None else first_wall
-                wait = (record.log_time - first_log) * 1e-9 / speed - (time.monotonic() - first_wall)
-                if wait > 0 and stop.wait(wait):
-                    return
-            if stop.is_set():
+    for log_time, _, message in LogMessages(path, accept):
+        if speed > 0:
+            if first_log is None:
+                first_log = log_time
+                first_wall = time.monotonic() + (0.0 if start_at is None else start_at - time.time())
+            wait = (log_time - first_log) * 1e-9 / speed - (time.monotonic() - first_wall)
+            if wait > 0 and stop.wait(wait):
                 return
-            yield messages.CLASSES[name].FromString(record.data)
+        if stop.is_set():
+            return
+        if messages.type_name(message) == "ImuBatch" and not message.received_ns:
+            message.received_ns = log_time
+        yield message
 
 
 def run_edge(config: zenoh.Config, session: Session, agent_id: str, source: Iterable[Any], stop: threading.Event,
              pose_rate_hz: float = 50.0, wait_for: int = 0, wait_timeout_s: float = 60.0,
              progress: Callable[[EdgeSummary], None] | None = None) -> EdgeSummary:
     """Run one chair's edge until the source ends or `stop` is set."""
-    agent = session.agent(agent_id)
+    edge = ChairEdge(session.agent(agent_id), pose_rate_hz)
     venue = session.venue.name
-    settings = ChairSettings(wheel_diameter_m=agent.wheel_diameter_m, camber_deg=agent.camber_deg)
-    merger = ChairMerger(agent)
     summary = EdgeSummary(agent_id)
-    period_ns = int(1e9 / pose_rate_hz)
-    state, next_pose_ns = None, 0
-    with open_session(config) as bus, Publisher(bus) as publisher, Alive(bus, venue, wire.Role.EDGE, agent_id):
+    with open_session(config) as bus, Publisher(bus) as publisher, \
+            Subscription(bus, keys.correction(venue, agent_id), capacity=256) as corrections, \
+            Alive(bus, venue, wire.Role.EDGE, agent_id):
         if wait_for:
             wait_for_peers(bus, [wire.alive_selector(venue, wire.Role.HUB), wire.alive_selector(venue, wire.Role.RECORDER)],
                            wait_for, wait_timeout_s)
 
-        def estimate(samples: list) -> None:
-            nonlocal state, next_pose_ns
-            for sample in samples:
-                summary.samples += 1
-                if state is None:
-                    state = start(settings, sample, agent.start_x_m, agent.start_y_m, agent.start_heading_rad)
-                    continue
-                state = step(settings, state, sample)
-                if state.flags & Flag.IMPACT:
-                    summary.impacts += 1
-                    peak = math.sqrt(sum(a * a for a in sample.accel_g)) - 1.0
-                    publisher.publish(keys.impact(venue, agent_id), messages.new(
-                        "ImpactEvent", timestamp_ns=sample.time_ns, agent_id=agent_id, peak_g=peak))
-                if sample.time_ns >= next_pose_ns:  # on a fixed schedule, so timestamp jitter costs no pose
-                    next_pose_ns = max(next_pose_ns + period_ns, sample.time_ns - period_ns // 2)
-                    summary.poses += 1
-                    publisher.publish(keys.pose(venue, agent_id, "edge"), messages.new(
-                        "EstimatedPose", timestamp_ns=sample.time_ns, agent_id=agent_id, x_m=float(state.mean[0]),
-                        y_m=float(state.mean[1]), heading_rad=float(state.mean[2]),
-                        covariance=state.cov[:3, :3].ravel().tolist(), method="reckon", track=messages.Track.LIVE))
+        def publish(outputs: list[Any]) -> None:
+            for out in outputs:
+                if messages.type_name(out) == "ImpactEvent":
+                    publisher.publish(keys.impact(venue, agent_id), out)
+                else:
+                    publisher.publish(keys.pose(venue, agent_id, "edge"), out)
 
         for message in source:
             summary.messages_in += 1
+            _take_corrections(corrections, edge)
             if message.DESCRIPTOR.name == "ImuBatch":
                 publisher.publish(keys.imu(venue, agent_id, message.sensor_id), message)  # raw first: nothing lost
-                estimate(merger.push_batch(message))
+                publish(edge.push(message))
             else:
                 publisher.publish(keys.beacon(venue, agent_id, message.sensor_id), message)
             if progress and summary.messages_in % 1000 == 0:
-                progress(summary)
-        estimate(merger.flush())
-        summary.extrapolated = merger.counters.extrapolated
-        summary.wheel_overrun = merger.counters.wheel_overrun
-        if state is not None:
-            summary.final_pose = (float(state.mean[0]), float(state.mean[1]), float(state.mean[2]))
+                progress(_summarise(summary, edge))
+        publish(edge.flush())
         flush(bus, wire.alive_selector(venue), FLUSH_TIMEOUT_S)  # closing drops what is still queued
+    return _summarise(summary, edge)
+
+
+def _take_corrections(subscription: Subscription, edge: ChairEdge) -> None:
+    """Hand every Correction that has arrived to the edge (never waits)."""
+    while True:
+        try:
+            item = subscription.get(timeout=0)
+        except queue.Empty:
+            return
+        if item is None:
+            return
+        try:
+            message = item.decode()
+        except Exception as error:  # a foreign sample on our key: counted by the log, never fatal
+            log.warning("ignoring a sample on %s: %s", item.key, error)
+            continue
+        if messages.type_name(message) == "Correction":
+            edge.correct(message)
+
+
+def _summarise(summary: EdgeSummary, edge: ChairEdge) -> EdgeSummary:
+    summary.samples, summary.poses, summary.impacts = edge.samples, edge.poses, edge.impacts
+    summary.corrections = edge.corrections_applied
+    summary.extrapolated = edge.merger.counters.extrapolated
+    summary.wheel_overrun = edge.merger.counters.wheel_overrun
+    if edge.state is not None:
+        mean = edge.state.mean
+        summary.final_pose = (float(mean[0]), float(mean[1]), float(mean[2]))
     return summary
 
 
@@ -140,41 +159,65 @@ class SerialSources:
     """One reader thread per `SENSOR=serial://PORT?baud=N` source, all feeding one blocking queue.
 
     Ports are opened here, at once, so a device that is missing fails before anything starts.
-    Iterating yields ImuBatch messages until every device has gone away or `stop` is set; a
-    device that disappears ends its own stream only (its last frames are kept).
+    A device that goes away (link lost, unplugged) keeps its last frames; its reader then tries
+    to open the port again every `RETRY_S` and carries on when the device is back, for up to
+    `reconnect_s`; after that its stream ends. Iterating yields ImuBatch messages, each stamped
+    with the host clock at its arrival, until every stream has ended or `stop` is set.
     """
 
     _DONE = object()
+    RETRY_S = 0.5
 
-    def __init__(self, specs: list[tuple[str, str]], agent_id: str, stop: threading.Event):
+    def __init__(self, specs: list[tuple[str, str]], agent_id: str, stop: threading.Event, reconnect_s: float = 30.0):
         from edge.decoders import ImuBatcher, Ximu3Decoder
         from edge.sources.serial_source import SerialSource
 
         self.stop = stop
+        self.reconnect_s = reconnect_s
+        self.reconnects = 0
         self.queue: queue.Queue[Any] = queue.Queue(maxsize=1000)  # blocks the readers, never drops
-        self.sources = [(SerialSource(url, Ximu3Decoder()).open(), ImuBatcher(agent_id, sensor_id))
+        self.sources = [(url, SerialSource(url, Ximu3Decoder()).open(), ImuBatcher(agent_id, sensor_id))
                         for sensor_id, url in specs]
-        self.threads = [threading.Thread(target=self._read, args=pair, daemon=True) for pair in self.sources]
+        self.threads = [threading.Thread(target=self._read, args=triple, daemon=True) for triple in self.sources]
         for thread in self.threads:
             thread.start()
 
-    def _read(self, source: Any, batcher: Any) -> None:
-        from edge.sources.serial_source import DeviceDisconnected
+    def _put(self, batches: list[Any]) -> None:
+        now = time.time_ns()
+        for batch in batches:
+            batch.received_ns = now
+            self.queue.put(batch)
+
+    def _read(self, url: str, source: Any, batcher: Any) -> None:
+        from edge.decoders import Ximu3Decoder
+        from edge.sources.serial_source import DeviceDisconnected, DeviceUnavailable, SerialSource
 
         try:
             while not self.stop.is_set():
-                for batch in batcher.feed(source.read_frames()):
-                    self.queue.put(batch)
-        except DeviceDisconnected as gone:
-            for batch in batcher.feed(gone.frames):
-                self.queue.put(batch)
-            log.warning("%s", gone)
+                try:
+                    while not self.stop.is_set():
+                        self._put(batcher.feed(source.read_frames()))
+                except DeviceDisconnected as gone:
+                    self._put(batcher.feed(gone.frames))
+                    source.close()
+                    log.warning("%s; trying to reopen it for %.0f s", gone, self.reconnect_s)
+                    source = None
+                    deadline = time.monotonic() + self.reconnect_s
+                    while source is None and time.monotonic() < deadline and not self.stop.wait(self.RETRY_S):
+                        try:
+                            source = SerialSource(url, Ximu3Decoder()).open()
+                        except DeviceUnavailable:
+                            continue
+                    if source is None:
+                        return
+                    self.reconnects += 1
+                    log.warning("%s is back (reconnect %d)", url, self.reconnects)
         except Exception as error:  # handed to the consumer, raised there
             self.queue.put(error)
         finally:
-            for batch in batcher.flush():
-                self.queue.put(batch)
-            source.close()
+            self._put(batcher.flush())
+            if source is not None:
+                source.close()
             self.queue.put(self._DONE)
 
     def __iter__(self) -> Iterator[Any]:
@@ -190,7 +233,7 @@ class SerialSources:
 
 
 def open_sources(urls: list[str], agent_id: str, speed: float, stop: threading.Event,
-                 venue_toml: Path | None = None) -> tuple[Session, Iterable[Any]]:
+                 venue_toml: Path | None = None, reconnect_s: float = 30.0, start_at: float | None = None) -> tuple[Session, Iterable[Any]]:
     """(session description, message stream) for `--source` URLs.
 
     `mcap://FILE`: this agent's sensors from a session log (one source; the description comes from
@@ -200,9 +243,9 @@ def open_sources(urls: list[str], agent_id: str, speed: float, stop: threading.E
     if len(urls) == 1 and urlparse(urls[0]).scheme == "mcap":
         parsed = urlparse(urls[0])
         path = Path(parsed.netloc + parsed.path)
-        session = _description(venue_toml) if venue_toml else read_description(path)
+        session = session_description(venue_toml) if venue_toml else read_description(path)
         _check_agent(session, agent_id, str(path))
-        return session, mcap_source(path, agent_id, speed, stop)
+        return session, mcap_source(path, agent_id, speed, stop, start_at)
     specs = []
     for url in urls:
         sensor_id, sep, device = url.partition("=")
@@ -211,17 +254,17 @@ def open_sources(urls: list[str], agent_id: str, speed: float, stop: threading.E
         specs.append((sensor_id, device))
     if venue_toml is None:
         raise ConfigError("--venue VENUE.toml is needed with serial sources (it says which sensor is where)")
-    session = _description(venue_toml)
+    session = session_description(venue_toml)
     agent = _check_agent(session, agent_id, str(venue_toml))
     known = {s.id for s in agent.sensors}
     for sensor_id, _ in specs:
         if sensor_id not in known:
             raise ConfigError(f"--source {sensor_id}=...: {agent_id} has no sensor {sensor_id!r} "
                               f"(sensors: {', '.join(sorted(known))})")
-    return session, SerialSources(specs, agent_id, stop)
+    return session, SerialSources(specs, agent_id, stop, reconnect_s)
 
 
-def _description(path: Path) -> Session:
+def session_description(path: Path) -> Session:
     """A session description from a TOML file or from a session log's own record."""
     return read_description(path) if Path(path).suffix == ".mcap" else load_toml(path)
 

@@ -46,12 +46,14 @@ SAMPLES: dict[str, dict[str, Any]] = {
                        other_agent_id="b"),
     "TruthContact": dict(timestamp_ns=7, agent_id="a", other_agent_id="b", kind=int(messages.ContactKind.LATERAL),
                          closing_speed_mps=1.5),
+    "PositionFix": dict(timestamp_ns=8, agent_id="a", kind=int(messages.CorrectionKind.MANUAL), x_m=1.0, y_m=2.0,
+                        covariance=[0.25, 0.0, 0.0, 0.25], source_id="operator"),
 }
 KEYS = {
     "ImuBatch": keys.imu(VENUE, "a", "a-seat"), "BeaconSighting": keys.beacon(VENUE, "a", "a-seat"),
     "TruthPose": keys.truth(VENUE, "a"), "EstimatedPose": keys.pose(VENUE, "a"),
     "ImpactEvent": keys.impact(VENUE, "a"), "Correction": keys.correction(VENUE, "a"),
-    "TruthContact": keys.contact(VENUE, "a"),
+    "TruthContact": keys.contact(VENUE, "a"), "PositionFix": keys.fix(VENUE, "a"),
 }
 
 # The publishing side of the round trip, in its own interpreter: it must also exit without hanging.

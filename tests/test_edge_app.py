@@ -110,7 +110,8 @@ def test_three_serial_devices_on_ptys_through_the_edge(game):
     stop = threading.Event()
     try:
         urls = [f"{sensor.id}=serial://{device.port}?baud=115200" for sensor, device in zip(agent.sensors, devices)]
-        session, source = open_sources(urls, "chair01", 0.0, stop, venue_toml=game)  # ports open now
+        # reconnect_s=0: a device that goes away ends its stream at once
+        session, source = open_sources(urls, "chair01", 0.0, stop, venue_toml=game, reconnect_s=0.0)
         result = {}
         edge = threading.Thread(target=lambda: result.update(summary=run_edge(
             zenoh_config(listen=[free_endpoint()]), session, "chair01", source, stop)), daemon=True)
@@ -122,7 +123,7 @@ def test_three_serial_devices_on_ptys_through_the_edge(game):
         # unplug only once every byte has been read: bytes still in a pty when it closes are lost,
         # as they would be on a real cable
         deadline = time.monotonic() + WAIT_S
-        readers = [reader for reader, _ in source.sources]
+        readers = [reader for _, reader, _ in source.sources]
         while any(r.bytes_read < d.bytes_total for r, d in zip(readers, devices)) and time.monotonic() < deadline:
             edge.join(timeout=0.01)
         assert [r.bytes_read for r in readers] == [d.bytes_total for d in devices]

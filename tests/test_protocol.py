@@ -35,6 +35,8 @@ def test_every_message_round_trips_with_schema_version():
                            other_agent_id="b"),
         "TruthContact": dict(timestamp_ns=7, agent_id="a", other_agent_id="b", kind=messages.ContactKind.LATERAL,
                              closing_speed_mps=1.5),
+        "PositionFix": dict(timestamp_ns=8, agent_id="a", kind=messages.CorrectionKind.MANUAL, x_m=1.0, y_m=2.0,
+                            covariance=[0.25, 0.0, 0.0, 0.25], source_id="operator"),
     }
     assert set(samples) == set(messages.TABLES)
     for name, fields in samples.items():

@@ -18,7 +18,7 @@ from reckon.evaluation.inputs import EvalInputs, agent_impacts, build_inputs
 from reckon.evaluation.metrics import (DetectionScore, ErrorSummary, average_summaries, error_summary,
                                        score_collisions)
 from reckon.evaluation.paper_run import VIDEO_RUNS, reception_from_sightings, reception_from_truth, run_paper
-from reckon.evaluation.reckon_run import merged_samples, run_reckon
+from reckon.evaluation.reckon_run import log_inputs, run_reckon
 
 log = logging.getLogger(__name__)
 
@@ -112,12 +112,12 @@ def evaluate_data(data: SessionData, path: Path, progress: Callable[[str], None]
             report.rows.append(ResultRow("paper", source.value, corrections, None, average_summaries(summaries),
                                          estimate.corrections_applied, curve, estimate.x_m, estimate.y_m))
     if all(a.seat_gyro_dps is not None for a in inputs.agents):
-        progress("reckon: merging each chair's three sensors")
-        samples = {a.agent.id: merged_samples(a) for a in inputs.agents}
+        progress("reckon: reading the log in arrival order")
+        arrivals = log_inputs(path)
         for corrections in RECKON_CORRECTION_SETS:
             progress(f"reckon, corrections {'+'.join(corrections) or 'none'}")
             for track, estimate in zip(("live", "refined"),
-                                       run_reckon(inputs, frozenset(corrections), venue, data.sightings, samples)):
+                                       run_reckon(data.session, arrivals, inputs.frame_ns, frozenset(corrections))):
                 error = np.hypot(estimate.x_m - truth_x, estimate.y_m - truth_y)
                 report.rows.append(ResultRow("reckon", HeadingSource.SENSORS.value, corrections, track,
                                              error_summary(error, frame_s), estimate.corrections_applied,

@@ -1,35 +1,34 @@
-"""Our method offline: the per-chair filter (edge/chair_estimator.py) and the hub's corrections.
+"""Our method offline: the live edge and hub code, driven in lockstep from a session log.
 
-All chairs advance together frame by frame (10 Hz, the hub's correction rate); between frames
-each filter steps through its own seat samples. `live` is what the hub would publish at each
-frame; `refined` is a Rauch-Tung-Striebel pass over the frames (the whole session here: the
-offline limit of the hub's fixed-lag smoother).
+Every message of the log goes, in arrival (log time) order, where it would go live: an ImuBatch
+to its chair's edge (edge/chair_edge.py) and to the hub (hub/chair_hub.py, for clock offsets),
+the edge's poses and impacts to the hub, a beacon sighting to the hub, and the hub's
+corrections back to the edge at once. So `reckon eval` scores exactly what `reckon edge` +
+`reckon hub` compute, minus the bus's delay and reordering.
 
-Corrections: `beacon` (closest approach of each pass near a goal, hub/chair_corrections.py) and
-`collision` (impacts grouped within 0.5 s; in a group of two or more chairs, the pair whose
-estimates best fit a contact is pulled to contact distance, chi-square gated).
+`live`: at each scoring frame, the newest live pose the hub had published by then. `refined`:
+the hub's fixed-lag track, interpolated at the frames.
 """
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from edge.chair_estimator import (BIAS, GYRO_SCALE, HEADING, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState,
-                                  position_update, start, step)
+from edge.chair_edge import ChairEdge
 from edge.chair_merger import ChairMerger
-from hub.chair_corrections import CONTACT_DISTANCE_M, CONTACT_SD_M, beacon_fix, contact_update
-from hub.paper_rules import group_impacts
-from protocol.session import Venue
-from protocol.session_log import Sightings
-from reckon.evaluation.inputs import FRAME_HZ, AgentInputs, EvalInputs, agent_impacts
+from edge.chair_estimator import ChairSample
+from hub.chair_hub import ChairHub, HubSettings
+from protocol import messages
+from protocol.session import Session
+from protocol.session_log import LogMessages
+from reckon.evaluation.inputs import AgentInputs
 
 RECKON_CORRECTIONS = ("beacon", "collision")
-IMPACT_THRESHOLD_G = 6.0  # lower than the paper's 8 g: the gate, not the threshold, rejects false pairs
-PASS_FLOOR_DBM = -72.0  # sightings weaker than this (about 4 m from a goal) do not start or extend a pass
-PASS_END_S = 1.5  # a pass ends after this long without a sighting above the floor
+INPUT_TYPES = ("ImuBatch", "BeaconSighting")
 
 
 @dataclass
@@ -39,47 +38,73 @@ class ReckonEstimate:
     corrections_applied: int
 
 
-@dataclass(frozen=True)
-class PassFix:
-    frame: int  # when the pass ended: the fix is applied then
-    peak_frame: int  # where the chair was at the peak
-    xy: np.ndarray
-    covariance: np.ndarray
+def log_inputs(path: Path | str) -> list[tuple[int, Any]]:
+    """(log_time_ns, message) of every sensor message, with the arrival stamped as `received_ns`."""
+    out = []
+    for log_time, _, message in LogMessages(path):
+        if messages.type_name(message) in INPUT_TYPES:
+            if messages.type_name(message) == "ImuBatch" and not message.received_ns:
+                message.received_ns = log_time
+            out.append((log_time, message))
+    return out
 
 
-class AgentTrack:
-    """One chair's filter, stepped up to each frame time; keeps what the smoother needs."""
+def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubSettings) -> tuple[ChairHub, dict, dict]:
+    """(hub, live, refined): per agent, arrays (time_ns, x, y) of the hub's two tracks."""
+    hub = ChairHub(session, settings)
+    edges = {agent.id: ChairEdge(agent, settings.pose_rate_hz) for agent in session.agents}
+    tracks: dict[int, dict[str, list]] = {messages.Track.LIVE: {}, messages.Track.REFINED: {}}
 
-    def __init__(self, agent: AgentInputs, samples: list[ChairSample], n_frames: int):
-        self.agent = agent
-        self.settings = ChairSettings(wheel_diameter_m=agent.agent.wheel_diameter_m, camber_deg=agent.agent.camber_deg)
-        self.samples = samples
-        x0, y0, h0 = agent.start_pose()
-        self.state: ChairState = start(self.settings, self.samples[0], x0, y0, h0)
-        self.next = 1
-        self.prior_mean = np.zeros((n_frames, N))
-        self.prior_cov = np.zeros((n_frames, N, N))
-        self.post_mean = np.zeros((n_frames, N))
-        self.post_cov = np.zeros((n_frames, N, N))
-        self.transition = np.zeros((n_frames, N, N))
+    def to_hub(message: Any) -> None:
+        for out in hub.on_message(message):
+            if messages.type_name(out) == "Correction":
+                edges[out.agent_id].correct(out)
+            else:
+                tracks[out.track].setdefault(out.agent_id, []).append((out.timestamp_ns, out.x_m, out.y_m))
 
-    def advance(self, until_ns: int, frame: int) -> None:
-        """Step through every sample up to `until_ns`; record the prior for frame `frame`."""
-        start_mean = self.state.mean
-        while self.next < len(self.samples) and self.samples[self.next].time_ns <= until_ns:
-            self.state = step(self.settings, self.state, self.samples[self.next])
-            self.next += 1
-        self.prior_mean[frame] = self.state.mean
-        self.prior_cov[frame] = self.state.cov
-        self.transition[frame] = _frame_jacobian(start_mean, self.state.mean)
+    for _, message in inputs:
+        to_hub(message)
+        edge = edges.get(message.agent_id)
+        if edge is not None and messages.type_name(message) == "ImuBatch":
+            for out in edge.push(message):
+                to_hub(out)
+    for edge in edges.values():
+        for out in edge.flush():
+            to_hub(out)
+    for out in hub.flush():
+        tracks[out.track].setdefault(out.agent_id, []).append((out.timestamp_ns, out.x_m, out.y_m))
+    as_arrays = {track: {agent: np.array(rows) for agent, rows in by_agent.items()} for track, by_agent in tracks.items()}
+    return hub, as_arrays[messages.Track.LIVE], as_arrays[messages.Track.REFINED]
 
-    def settle(self, frame: int) -> None:
-        self.post_mean[frame] = self.state.mean
-        self.post_cov[frame] = self.state.cov
+
+def run_reckon(session: Session, inputs: list[tuple[int, Any]], frame_ns: np.ndarray, corrections: frozenset[str],
+               lag_s: float = HubSettings.lag_s) -> tuple[ReckonEstimate, ReckonEstimate]:
+    """(live, refined) estimates of every agent of `session` at `frame_ns`."""
+    hub, live, refined = run_lockstep(session, inputs, HubSettings(corrections=corrections, lag_s=lag_s))
+    applied = sum(sum(view.applied.values()) for view in hub.agents.values())
+    ids = [agent.id for agent in session.agents]
+    live_xy = [_newest_at(live.get(agent_id), frame_ns) for agent_id in ids]
+    refined_xy = [_interpolated(refined.get(agent_id), frame_ns) for agent_id in ids]
+    return (ReckonEstimate(np.array([xy[0] for xy in live_xy]), np.array([xy[1] for xy in live_xy]), applied),
+            ReckonEstimate(np.array([xy[0] for xy in refined_xy]), np.array([xy[1] for xy in refined_xy]), applied))
+
+
+def _newest_at(track: np.ndarray | None, frame_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The newest pose at or before each frame (the first pose before there is one)."""
+    if track is None or len(track) == 0:
+        return np.full(len(frame_ns), np.nan), np.full(len(frame_ns), np.nan)
+    index = np.clip(np.searchsorted(track[:, 0], frame_ns, side="right") - 1, 0, len(track) - 1)
+    return track[index, 1], track[index, 2]
+
+
+def _interpolated(track: np.ndarray | None, frame_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    if track is None or len(track) == 0:
+        return np.full(len(frame_ns), np.nan), np.full(len(frame_ns), np.nan)
+    return np.interp(frame_ns, track[:, 0], track[:, 1]), np.interp(frame_ns, track[:, 0], track[:, 2])
 
 
 def merged_samples(agent: AgentInputs) -> list[ChairSample]:
-    """The agent's logged samples pushed through the live path's merger, in arrival (time) order."""
+    """The agent's logged samples pushed through the live path's merger, in time order (tests)."""
     merger = ChairMerger(agent.agent)
     streams = [(sensor_id, series) for sensor_id, series in agent.raw.items()]
     times = np.concatenate([series.time_ns for _, series in streams])
@@ -93,125 +118,3 @@ def merged_samples(agent: AgentInputs) -> list[ChairSample]:
         samples += merger.push(sensor_id, int(series.time_ns[i]), tuple(series.accel_g[i].tolist()),
                                tuple(series.gyro_dps[i].tolist()), mag)
     return samples + merger.flush()
-
-
-def _frame_jacobian(before: np.ndarray, after: np.ndarray) -> np.ndarray:
-    """Jacobian of one frame's motion (state after vs state before), linearised over the frame.
-
-    A heading error rotates the frame's displacement; the gyro bias and scale errors act through
-    the heading, on average over the frame; the wheel scale stretches the displacement.
-    """
-    jacobian = np.eye(N)
-    dx, dy = after[X] - before[X], after[Y] - before[Y]
-    jacobian[X, HEADING], jacobian[Y, HEADING] = -dy, dx
-    if before[SCALE] != 0.0:
-        jacobian[X, SCALE], jacobian[Y, SCALE] = dx / before[SCALE], dy / before[SCALE]
-    turn = after[HEADING] - before[HEADING]
-    jacobian[HEADING, BIAS] = -1.0 / FRAME_HZ
-    jacobian[HEADING, GYRO_SCALE] = turn / (1.0 + before[GYRO_SCALE])
-    for column in (BIAS, GYRO_SCALE):
-        jacobian[X, column] = -dy * 0.5 * jacobian[HEADING, column]
-        jacobian[Y, column] = dx * 0.5 * jacobian[HEADING, column]
-    return jacobian
-
-
-def rts_smooth(track: AgentTrack) -> np.ndarray:
-    """Smoothed means over frames (Rauch-Tung-Striebel, frame-level linearisation).
-
-    North is left out: it is (re)initialised from the magnetometer fit, a jump no transition
-    explains, and positions do not depend on it.
-    """
-    kept = slice(0, NORTH)
-    smoothed = track.post_mean.copy()
-    for k in range(len(smoothed) - 2, -1, -1):
-        transition = track.transition[k + 1][kept, kept]
-        gain = track.post_cov[k][kept, kept] @ transition.T @ np.linalg.pinv(track.prior_cov[k + 1][kept, kept])
-        smoothed[k, kept] = track.post_mean[k, kept] + gain @ (smoothed[k + 1, kept] - track.prior_mean[k + 1, kept])
-    return smoothed
-
-
-def beacon_passes(frame_ns: np.ndarray, sightings: Sightings | None, venue: Venue) -> list[PassFix]:
-    """Each pass near a goal (sightings above the floor, gaps < PASS_END_S) -> one fix at its peak."""
-    fixes: list[PassFix] = []
-    if sightings is None:
-        return fixes
-    for beacon in venue.beacons:
-        strong = (sightings.beacon_id == beacon.id) & (sightings.rssi_dbm >= PASS_FLOOR_DBM)
-        times, rssi = sightings.time_ns[strong], sightings.rssi_dbm[strong]
-        if len(times) == 0:
-            continue
-        breaks = np.flatnonzero(np.diff(times) > PASS_END_S * 1e9) + 1
-        for pass_times, pass_rssi in zip(np.split(times, breaks), np.split(rssi, breaks)):
-            peak = int(np.argmax(pass_rssi))
-            fix = beacon_fix(beacon, float(pass_rssi[peak]))
-            if fix is None:
-                continue
-            end = int(np.searchsorted(frame_ns, pass_times[-1] + PASS_END_S * 1e9))
-            peak_frame = min(int(np.searchsorted(frame_ns, pass_times[peak])), len(frame_ns) - 1)
-            if end < len(frame_ns):
-                fixes.append(PassFix(end, peak_frame, fix.xy, fix.covariance))
-    return fixes
-
-
-def impact_groups(inputs: EvalInputs, frame_ns: np.ndarray) -> dict[int, list[list[str]]]:
-    groups: dict[int, list[list[str]]] = {}
-    for time_ns, agents in group_impacts(agent_impacts(inputs, IMPACT_THRESHOLD_G)):
-        k = int(np.searchsorted(frame_ns, time_ns))
-        if len(agents) >= 2 and k < len(frame_ns):
-            groups.setdefault(k, []).append(agents)
-    return groups
-
-
-def _best_pair(tracks: dict[str, AgentTrack], agents: list[str]) -> tuple[str, str] | None:
-    """The pair whose estimated separation best fits a contact (smallest normalised residual)."""
-    best, best_score = None, np.inf
-    for a, b in itertools.combinations(agents, 2):
-        sa, sb = tracks[a].state, tracks[b].state
-        distance = float(np.hypot(*(sa.mean[:2] - sb.mean[:2])))
-        spread = np.trace(sa.cov[:2, :2]) / 2 + np.trace(sb.cov[:2, :2]) / 2 + CONTACT_SD_M**2
-        score = (distance - CONTACT_DISTANCE_M) ** 2 / spread
-        if score < best_score:
-            best, best_score = (a, b), score
-    return best
-
-
-def run_reckon(inputs: EvalInputs, corrections: frozenset[str], venue: Venue, sightings: dict[str, Sightings],
-               samples: dict[str, list[ChairSample]] | None = None) -> tuple[ReckonEstimate, ReckonEstimate]:
-    """(live, refined) estimates of every chair at every frame.
-
-    `samples`: each agent's `merged_samples`, when the caller runs several correction sets.
-    """
-    frame_ns = inputs.frame_ns
-    samples = samples or {agent.agent.id: merged_samples(agent) for agent in inputs.agents}
-    tracks = {agent.agent.id: AgentTrack(agent, samples[agent.agent.id], len(frame_ns)) for agent in inputs.agents}
-    fixes_at: dict[int, list[tuple[str, PassFix]]] = {}
-    if "beacon" in corrections:
-        for agent_id in tracks:
-            for fix in beacon_passes(frame_ns, sightings.get(agent_id), venue):
-                fixes_at.setdefault(fix.frame, []).append((agent_id, fix))
-    groups = impact_groups(inputs, frame_ns) if "collision" in corrections else {}
-    applied = 0
-    for k, now_ns in enumerate(frame_ns):
-        for track in tracks.values():
-            track.advance(int(now_ns), k)
-        for agent_id, fix in fixes_at.get(k, ()):
-            track = tracks[agent_id]
-            # delayed fix: the chair was at fix.xy when the peak came; carry that offset to now
-            shift = fix.xy - track.post_mean[fix.peak_frame, :2]
-            track.state, used = position_update(track.state, track.state.mean[:2] + shift, fix.covariance)
-            applied += used
-        for agents in groups.get(k, ()):
-            pair = _best_pair(tracks, agents)
-            if pair:
-                a, b = pair
-                tracks[a].state, tracks[b].state, used = contact_update(tracks[a].state, tracks[b].state)
-                applied += used
-        for track in tracks.values():
-            track.settle(k)
-    ordered = [tracks[agent.agent.id] for agent in inputs.agents]
-    live = ReckonEstimate(np.array([t.post_mean[:, X] for t in ordered]), np.array([t.post_mean[:, Y] for t in ordered]), applied)
-    smoothed = [rts_smooth(t) for t in ordered]
-    refined = ReckonEstimate(np.array([s[:, X] for s in smoothed]), np.array([s[:, Y] for s in smoothed]), applied)
-    return live, refined
-
-

@@ -1,0 +1,330 @@
+"""The hub's computation for a venue of chairs, without I/O: messages in, messages out.
+
+In: every agent's raw ImuBatch (only for clock offsets), EstimatedPose from its edge,
+ImpactEvent, BeaconSighting, and PositionFix from an operator or a video tracker.
+Out: a live corrected pose per agent as each edge pose arrives, a refined pose once it is `lag_s`
+old (hub/smoother.py), and Correction messages for the edges.
+
+Why corrections go back to the edges: the edge holds the whole state (heading, gyro bias, wheel
+scale), so a position measurement applied there also corrects the heading error that caused the
+drift, which an offset kept at the hub could not. Until an edge's pose says it has taken a
+correction (`correction_sequence`), the hub adds the shift it expects the edge to make.
+
+All times here are venue time: device timestamps plus each device's clock offset (hub/clocks.py).
+- Collisions: impacts above `impact_g` within `pairing_window_s` of the first form a group, closed
+  once every live agent's poses have passed it by `lateness_s`. Every pair in the group is scored
+  by how well the two estimates fit a contact (chi-square with both covariances); pairs inside the
+  gate are taken best first, each chair at most once, so three or more impacts at once still yield
+  their pairs. A pair becomes one relative constraint: each chair gets the measurement of the
+  other's side (exactly the joint update of two independent estimates).
+- Beacons: one fix per pass near a goal, at its strongest sighting (hub/chair_corrections.py).
+- Fixes: an operator's or video position at a time, gated like a beacon fix.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hub.chair_corrections import CONTACT_DISTANCE_M, CONTACT_GATE_CHI2, CONTACT_SD_M, beacon_fix
+from hub.clocks import ClockOffsets
+from hub.smoother import FixedLagSmoother
+from protocol import keys, messages
+from protocol.session import Mount, Session
+
+Kind = messages.CorrectionKind
+CORRECTIONS = ("beacon", "collision", "fix")
+FIX_GATE_CHI2 = 13.8  # 99.9 %, 2 dof
+ACROSS_VARIANCE_M2 = 1e4  # a contact says nothing about the direction across the line between chairs
+HISTORY = 1024  # poses kept per agent for looking back to a measured time (20 s at 50 Hz)
+
+
+@dataclass(frozen=True)
+class HubSettings:
+    lag_s: float = 5.0  # refined poses leave this late
+    pose_rate_hz: float = 50.0  # of the edges; sizes the smoother's ring
+    corrections: frozenset[str] = frozenset(CORRECTIONS)
+    impact_g: float = 6.0  # lower than the paper's 8 g: the gate, not the threshold, rejects false pairs
+    pairing_window_s: float = 0.5
+    lateness_s: float = 1.0  # how long a group waits for the other chairs' impacts to arrive
+    stale_s: float = 5.0  # an agent silent this long no longer holds the others back
+    pass_floor_dbm: float = -72.0  # sightings weaker than this (about 4 m from a goal) are not a pass
+    pass_end_s: float = 1.5  # a pass ends after this long without a sighting above the floor
+
+    def __post_init__(self) -> None:
+        unknown = set(self.corrections) - set(CORRECTIONS)
+        if unknown:
+            raise ValueError(f"corrections {sorted(unknown)}: not among {', '.join(CORRECTIONS)}")
+        if self.lag_s < 0 or self.pose_rate_hz <= 0:
+            raise ValueError(f"lag_s {self.lag_s} must be >= 0 and pose_rate_hz {self.pose_rate_hz} > 0")
+
+
+@dataclass
+class _Pass:
+    peak_rssi: float
+    peak_ns: int
+    last_ns: int
+
+
+@dataclass
+class AgentView:
+    """What the hub knows of one agent."""
+
+    agent_id: str
+    seat_id: str
+    smoother: FixedLagSmoother
+    history: deque = field(default_factory=lambda: deque(maxlen=HISTORY))  # (time, xy, cov 2x2) live
+    latest_ns: int | None = None
+    covariance: np.ndarray = field(default_factory=lambda: np.eye(3))
+    pending: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (sequence, expected shift)
+    sequence: int = 0  # last Correction sent
+    acknowledged: int = 0
+    passes: dict[str, _Pass] = field(default_factory=dict)
+    applied: dict[str, int] = field(default_factory=lambda: {name: 0 for name in CORRECTIONS})
+    poses: int = 0
+
+    def pose_at(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """Live position and its covariance at `time_ns` (the last pose not after it)."""
+        if not self.history:
+            return None
+        chosen = self.history[0]
+        for entry in reversed(self.history):
+            if entry[0] <= time_ns:
+                chosen = entry
+                break
+        return chosen[1], chosen[2]
+
+
+@dataclass
+class HubCounters:
+    impacts: int = 0
+    groups: int = 0
+    pairs: int = 0
+    gated_out: int = 0  # candidate corrections the gate rejected
+    late_impacts: int = 0  # arrived after their window had closed: paired with later ones only
+
+
+class ChairHub:
+    def __init__(self, session: Session, settings: HubSettings = HubSettings()):
+        self.session = session
+        self.settings = settings
+        self.venue = session.venue.name
+        self.clocks = ClockOffsets()
+        self.beacons = {beacon.id: beacon for beacon in session.venue.beacons}
+        ring = int(settings.lag_s * settings.pose_rate_hz) + 2
+        self.agents: dict[str, AgentView] = {}
+        for agent in session.agents:
+            seat = agent.sensor(Mount.SEAT)
+            self.agents[agent.id] = AgentView(agent.id, seat.id if seat else "", FixedLagSmoother(settings.lag_s, ring))
+        self.impacts: deque[tuple[int, str]] = deque(maxlen=256)
+        self.closed_until_ns = -1
+        self.counters = HubCounters()
+
+    # -- inputs ------------------------------------------------------------------------------
+
+    def on_message(self, message: Any) -> list[Any]:
+        """Any input message; returns the messages to publish (see `key_for`)."""
+        name = messages.type_name(message)
+        if message.agent_id not in self.agents:
+            return []
+        if name == "ImuBatch":
+            if message.received_ns and len(message.sample_offset_ns):
+                self.clocks.observe(message.sensor_id, message.timestamp_ns + message.sample_offset_ns[-1],
+                                    message.received_ns)
+            return []
+        if name == "EstimatedPose":
+            return self.on_pose(message)
+        if name == "ImpactEvent":
+            self.on_impact(message)
+        elif name == "BeaconSighting":
+            return self.on_sighting(message)
+        elif name == "PositionFix":
+            return self.on_fix(message)
+        return []
+
+    def on_pose(self, pose: Any) -> list[Any]:
+        view = self.agents[pose.agent_id]
+        time_ns = self.clocks.to_venue(view.seat_id, pose.timestamp_ns)
+        if pose.correction_sequence < view.acknowledged:  # the edge restarted: it holds none of ours
+            view.pending.clear()
+        view.acknowledged = pose.correction_sequence
+        view.pending = [(seq, shift) for seq, shift in view.pending if seq > pose.correction_sequence]
+        xy = np.array([pose.x_m, pose.y_m]) + sum((shift for _, shift in view.pending), np.zeros(2))
+        covariance = np.array(pose.covariance, dtype=float).reshape(3, 3) if len(pose.covariance) == 9 else np.eye(3)
+        view.covariance = covariance
+        view.latest_ns = time_ns if view.latest_ns is None else max(view.latest_ns, time_ns)
+        view.history.append((time_ns, xy, covariance[:2, :2]))
+        view.poses += 1
+        out = [self._pose_message(view, time_ns, xy, pose.heading_rad, covariance, messages.Track.LIVE)]
+        out += [self._refined(view, entry) for entry in view.smoother.add(time_ns, xy, pose.heading_rad, covariance)]
+        out += self._end_passes(view)
+        out += self._close_groups()
+        return out
+
+    def on_impact(self, event: Any) -> None:
+        if event.peak_g < self.settings.impact_g or "collision" not in self.settings.corrections:
+            return
+        view = self.agents[event.agent_id]
+        time_ns = self.clocks.to_venue(event.sensor_id or view.seat_id, event.timestamp_ns)
+        self.counters.impacts += 1
+        if time_ns <= self.closed_until_ns:
+            self.counters.late_impacts += 1
+        self.impacts.append((time_ns, event.agent_id))
+
+    def on_sighting(self, sighting: Any) -> list[Any]:
+        if "beacon" not in self.settings.corrections or sighting.beacon_id not in self.beacons:
+            return []
+        if sighting.rssi_dbm < self.settings.pass_floor_dbm:
+            return []
+        view = self.agents[sighting.agent_id]
+        time_ns = self.clocks.to_venue(sighting.sensor_id or view.seat_id, sighting.timestamp_ns)
+        out = self._end_passes(view, time_ns)
+        current = view.passes.get(sighting.beacon_id)
+        if current is None:
+            view.passes[sighting.beacon_id] = _Pass(sighting.rssi_dbm, time_ns, time_ns)
+        else:
+            current.last_ns = max(current.last_ns, time_ns)
+            if sighting.rssi_dbm > current.peak_rssi:
+                current.peak_rssi, current.peak_ns = sighting.rssi_dbm, time_ns
+        return out
+
+    def on_fix(self, fix: Any) -> list[Any]:
+        if "fix" not in self.settings.corrections:
+            return []
+        view = self.agents[fix.agent_id]
+        covariance = np.array(fix.covariance, dtype=float).reshape(2, 2) if len(fix.covariance) == 4 else None
+        if covariance is None or not np.all(np.isfinite(covariance)) or np.linalg.det(covariance) <= 0:
+            raise ValueError(f"PositionFix for {fix.agent_id}: covariance {list(fix.covariance)} is not a 2 x 2 "
+                             "positive-definite matrix")
+        kind = Kind(fix.kind) if fix.kind in (Kind.VIDEO, Kind.MANUAL) else Kind.MANUAL
+        return self._absolute(view, fix.timestamp_ns, np.array([fix.x_m, fix.y_m]), covariance, kind, fix.source_id)
+
+    def flush(self) -> list[Any]:
+        """End of session: refined poses still inside the lag."""
+        out = []
+        for view in self.agents.values():
+            out += [self._refined(view, entry) for entry in view.smoother.flush()]
+        return out
+
+    # -- corrections ---------------------------------------------------------------------------
+
+    def _end_passes(self, view: AgentView, now_ns: int | None = None) -> list[Any]:
+        now_ns = view.latest_ns if now_ns is None else max(now_ns, view.latest_ns or now_ns)
+        out = []
+        for beacon_id, current in list(view.passes.items()):
+            if now_ns - current.last_ns <= self.settings.pass_end_s * 1e9:
+                continue
+            del view.passes[beacon_id]
+            fix = beacon_fix(self.beacons[beacon_id], current.peak_rssi)
+            if fix is not None:
+                out += self._absolute(view, current.peak_ns, fix.xy, fix.covariance, Kind.BEACON, beacon_id)
+        return out
+
+    def _absolute(self, view: AgentView, time_ns: int, xy: np.ndarray, covariance: np.ndarray, kind: Kind,
+                  source: str) -> list[Any]:
+        then = view.pose_at(time_ns)
+        if then is None:
+            return []
+        shift = xy - then[0]
+        spread = then[1] + covariance
+        if float(shift @ np.linalg.solve(spread, shift)) > FIX_GATE_CHI2:
+            self.counters.gated_out += 1
+            return []
+        return [self._send(view, time_ns, shift, covariance, kind, source=source)]
+
+    def _watermark(self) -> int | None:
+        """Venue time every live agent's poses have reached."""
+        latest = [v.latest_ns for v in self.agents.values() if v.latest_ns is not None]
+        if not latest:
+            return None
+        newest = max(latest)
+        return min(t for t in latest if newest - t <= self.settings.stale_s * 1e9)
+
+    def _close_groups(self) -> list[Any]:
+        watermark = self._watermark()
+        window_ns = int(self.settings.pairing_window_s * 1e9)
+        out: list[Any] = []
+        if watermark is None or not self.impacts:
+            return out
+        ordered = sorted(self.impacts)
+        while ordered and ordered[0][0] + window_ns + self.settings.lateness_s * 1e9 <= watermark:
+            first_ns = ordered[0][0]
+            group = [item for item in ordered if item[0] - first_ns <= window_ns]
+            ordered = ordered[len(group):]
+            self.closed_until_ns = max(self.closed_until_ns, group[-1][0])
+            agents = sorted({agent for _, agent in group})
+            if len(agents) >= 2:
+                self.counters.groups += 1
+                out += self._pair(first_ns, agents)
+        self.impacts = deque(ordered, maxlen=self.impacts.maxlen)
+        return out
+
+    def _pair(self, time_ns: int, agents: list[str]) -> list[Any]:
+        candidates = []
+        for a, b in itertools.combinations(agents, 2):
+            pose_a, pose_b = self.agents[a].pose_at(time_ns), self.agents[b].pose_at(time_ns)
+            if pose_a is None or pose_b is None:
+                continue
+            delta = pose_a[0] - pose_b[0]
+            distance = float(np.hypot(*delta))
+            if distance < 1e-6:
+                continue
+            unit = delta / distance
+            var_a, var_b = float(unit @ pose_a[1] @ unit), float(unit @ pose_b[1] @ unit)
+            innovation = CONTACT_DISTANCE_M - distance
+            score = innovation * innovation / (var_a + var_b + CONTACT_SD_M**2)
+            if score <= CONTACT_GATE_CHI2:
+                candidates.append((score, a, b, unit, innovation, var_a, var_b))
+            else:
+                self.counters.gated_out += 1
+        out, taken = [], set()
+        for score, a, b, unit, innovation, var_a, var_b in sorted(candidates, key=lambda c: c[0]):
+            if a in taken or b in taken:
+                continue
+            taken |= {a, b}
+            self.counters.pairs += 1
+            across = np.array([-unit[1], unit[0]])
+            for me, other, direction, noise in ((a, b, unit, var_b), (b, a, -unit, var_a)):
+                covariance = (noise + CONTACT_SD_M**2) * np.outer(direction, direction) + ACROSS_VARIANCE_M2 * np.outer(across, across)
+                out.append(self._send(self.agents[me], time_ns, direction * innovation, covariance, Kind.COLLISION,
+                                      other=other))
+        return out
+
+    def _send(self, view: AgentView, time_ns: int, measured: np.ndarray, covariance: np.ndarray, kind: Kind,
+              other: str = "", source: str = "") -> Any:
+        """Record a correction, expect its effect on the live pose, and build the message."""
+        prior = view.covariance[:2, :2]
+        gain = prior @ np.linalg.inv(prior + covariance)
+        expected = gain @ measured
+        view.sequence += 1
+        view.pending.append((view.sequence, expected))
+        after = (np.eye(2) - gain) @ prior
+        view.covariance = view.covariance.copy()
+        view.covariance[:2, :2] = after
+        view.smoother.correct(time_ns, expected, 0.5 * float(after[0, 0] + after[1, 1]))
+        view.applied[kind.name.lower() if kind != Kind.VIDEO and kind != Kind.MANUAL else "fix"] += 1
+        return messages.new("Correction", timestamp_ns=int(time_ns), agent_id=view.agent_id, kind=kind,
+                            dx_m=float(measured[0]), dy_m=float(measured[1]), other_agent_id=other, source_id=source,
+                            sequence=view.sequence, covariance=covariance.ravel().tolist())
+
+    def _refined(self, view: AgentView, entry: tuple) -> Any:
+        time_ns, x, y, heading, covariance = entry
+        return self._pose_message(view, time_ns, (x, y), heading, covariance, messages.Track.REFINED)
+
+    def _pose_message(self, view: AgentView, time_ns: int, xy: Any, heading: float, covariance: np.ndarray,
+                      track: messages.Track) -> Any:
+        return messages.new("EstimatedPose", timestamp_ns=int(time_ns), agent_id=view.agent_id, x_m=float(xy[0]),
+                            y_m=float(xy[1]), heading_rad=float(heading), covariance=covariance.ravel().tolist(),
+                            method="reckon", track=track, correction_sequence=view.sequence)
+
+    def key_for(self, message: Any) -> str:
+        """Where an output message goes on the bus."""
+        if messages.type_name(message) == "Correction":
+            return keys.correction(self.venue, message.agent_id)
+        track = "refined" if message.track == messages.Track.REFINED else "live"
+        return keys.pose(self.venue, message.agent_id, track)
