@@ -52,7 +52,7 @@ class HubSettings:
     impact_g: float = 6.0  # lower than the paper's 8 g: the gate, not the threshold, rejects false pairs
     pairing_window_s: float = 0.5
     lateness_s: float = 1.0  # how long a group waits for the other chairs' impacts to arrive
-    stale_s: float = 5.0  # an agent silent this long no longer holds the others back
+    stale_s: float = 5.0  # an agent silent this long (hub clock) no longer holds the others back
     pass_floor_dbm: float = -72.0  # sightings weaker than this (about 4 m from a goal) are not a pass
     pass_end_s: float = 1.5  # a pass ends after this long without a sighting above the floor
 
@@ -79,7 +79,8 @@ class AgentView:
     seat_id: str
     smoother: FixedLagSmoother
     history: deque = field(default_factory=lambda: deque(maxlen=HISTORY))  # (time, xy, cov 2x2) live
-    latest_ns: int | None = None
+    latest_ns: int | None = None  # venue time of the newest pose
+    arrival_ns: int = 0  # hub clock when its last message came
     covariance: np.ndarray = field(default_factory=lambda: np.eye(3))
     pending: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (sequence, expected shift)
     sequence: int = 0  # last Correction sent
@@ -123,15 +124,23 @@ class ChairHub:
             self.agents[agent.id] = AgentView(agent.id, seat.id if seat else "", FixedLagSmoother(settings.lag_s, ring))
         self.impacts: deque[tuple[int, str]] = deque(maxlen=256)
         self.closed_until_ns = -1
+        self.newest_arrival_ns = 0
         self.counters = HubCounters()
 
     # -- inputs ------------------------------------------------------------------------------
 
-    def on_message(self, message: Any) -> list[Any]:
-        """Any input message; returns the messages to publish (see `key_for`)."""
+    def on_message(self, message: Any, arrival_ns: int) -> list[Any]:
+        """Any input message and when it arrived (hub clock); returns the messages to publish (`key_for`).
+
+        Arrival times only tell a silent agent from a slow one: an agent whose last message came
+        `stale_s` before the newest arrival no longer holds the collision pairing back.
+        """
         name = messages.type_name(message)
-        if message.agent_id not in self.agents:
+        view = self.agents.get(message.agent_id)
+        if view is None:
             return []
+        view.arrival_ns = arrival_ns
+        self.newest_arrival_ns = max(self.newest_arrival_ns, arrival_ns)
         if name == "ImuBatch":
             if message.received_ns and len(message.sample_offset_ns):
                 self.clocks.observe(message.sensor_id, message.timestamp_ns + message.sample_offset_ns[-1],
@@ -239,11 +248,10 @@ class ChairHub:
 
     def _watermark(self) -> int | None:
         """Venue time every live agent's poses have reached."""
-        latest = [v.latest_ns for v in self.agents.values() if v.latest_ns is not None]
-        if not latest:
-            return None
-        newest = max(latest)
-        return min(t for t in latest if newest - t <= self.settings.stale_s * 1e9)
+        stale_ns = self.settings.stale_s * 1e9
+        latest = [v.latest_ns for v in self.agents.values()
+                  if v.latest_ns is not None and self.newest_arrival_ns - v.arrival_ns <= stale_ns]
+        return min(latest) if latest else None
 
     def _close_groups(self) -> list[Any]:
         watermark = self._watermark()

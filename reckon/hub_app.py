@@ -102,7 +102,7 @@ def run_hub(config: zenoh.Config, session: Session, stop: threading.Event, setti
                 if writer:
                     writer.write(item.key, message, item.received_ns)
                 summary.inputs += 1
-                emit(hub.on_message(message))
+                emit(hub.on_message(message, item.received_ns))
             except (InputError, ValueError) as error:
                 summary.skipped += 1
                 skipped_since += 1

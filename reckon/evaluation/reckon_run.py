@@ -55,22 +55,23 @@ def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubS
     edges = {agent.id: ChairEdge(agent, settings.pose_rate_hz) for agent in session.agents}
     tracks: dict[int, dict[str, list]] = {messages.Track.LIVE: {}, messages.Track.REFINED: {}}
 
-    def to_hub(message: Any) -> None:
-        for out in hub.on_message(message):
+    def to_hub(message: Any, arrival_ns: int) -> None:
+        for out in hub.on_message(message, arrival_ns):
             if messages.type_name(out) == "Correction":
                 edges[out.agent_id].correct(out)
             else:
                 tracks[out.track].setdefault(out.agent_id, []).append((out.timestamp_ns, out.x_m, out.y_m))
 
-    for _, message in inputs:
-        to_hub(message)
+    arrival_ns = 0
+    for arrival_ns, message in inputs:
+        to_hub(message, arrival_ns)
         edge = edges.get(message.agent_id)
         if edge is not None and messages.type_name(message) == "ImuBatch":
             for out in edge.push(message):
-                to_hub(out)
+                to_hub(out, arrival_ns)
     for edge in edges.values():
         for out in edge.flush():
-            to_hub(out)
+            to_hub(out, arrival_ns)
     for out in hub.flush():
         tracks[out.track].setdefault(out.agent_id, []).append((out.timestamp_ns, out.x_m, out.y_m))
     as_arrays = {track: {agent: np.array(rows) for agent, rows in by_agent.items()} for track, by_agent in tracks.items()}
