@@ -46,7 +46,7 @@ HISTORY = 1024  # poses kept per agent for looking back to a measured time (20 s
 
 @dataclass(frozen=True)
 class HubSettings:
-    lag_s: float = 5.0  # refined poses leave this late
+    lag_s: float = 30.0  # refined poses leave this late (a pass near a goal every 10-30 s)
     pose_rate_hz: float = 50.0  # of the edges; sizes the smoother's ring
     corrections: frozenset[str] = frozenset(CORRECTIONS)
     impact_g: float = 6.0  # lower than the paper's 8 g: the gate, not the threshold, rejects false pairs

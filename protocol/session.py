@@ -12,6 +12,7 @@ import dataclasses
 import enum
 import json
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +23,12 @@ from protocol.keys import check_id
 
 FORMAT_VERSION = 1
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+# A beacon's advertisement identity, as edge.decoders.ble_adverts produces it from the air (that
+# module's normalize_identity is the same rule; protocol imports nothing from edge).
+_IDENTITY = re.compile(
+    r"ibeacon:(?P<uuid>[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12})"
+    r":(?P<major>\d{1,5}):(?P<minor>\d{1,5})"
+    r"|eddystone:[0-9a-f]{20}:[0-9a-f]{12}")
 
 
 class Mount(str, enum.Enum):
@@ -44,6 +51,9 @@ class Beacon:
     radius_m: float = 1.0  # reception zone the paper assumes (its simulation, sec. 4.4.1)
     tx_power_dbm: float = -59.0  # RSSI at 1 m, the iBeacon calibration figure
     height_m: float = 2.9  # under the backboard (3.05 m rim), out of play; a floor beacon would be in play
+    # What the beacon advertises, canonical: "ibeacon:<uuid>:<major>:<minor>" or
+    # "eddystone:<namespace, 20 hex>:<instance, 12 hex>". None: not heard by `ble://scan`.
+    identity: str | None = None
 
 
 @dataclass(frozen=True)
@@ -152,6 +162,19 @@ def _list(data: dict[str, Any], key: str, where: str) -> list[Any]:
     return value
 
 
+def beacon_identity(text: Any, where: str) -> str:
+    """A beacon identity in canonical form (lower case, iBeacon major/minor without leading zeros);
+    ConfigError naming `where` when it is not one. Same rule as edge's normalize_identity."""
+    folded = text.strip().lower() if isinstance(text, str) else ""
+    match = _IDENTITY.fullmatch(folded)
+    if match is None or (match["uuid"] and max(int(match["major"]), int(match["minor"])) > 0xFFFF):
+        raise ConfigError(f"{where}: {text!r} is not ibeacon:<uuid>:<major 0-65535>:<minor 0-65535> "
+                          "or eddystone:<namespace, 20 hex digits>:<instance, 12 hex digits>")
+    if match["uuid"]:
+        return f"ibeacon:{match['uuid']}:{int(match['major'])}:{int(match['minor'])}"
+    return folded
+
+
 def _beacon(data: dict[str, Any], where: str) -> Beacon:
     _check_keys(data, Beacon, where)
     return Beacon(
@@ -161,6 +184,7 @@ def _beacon(data: dict[str, Any], where: str) -> Beacon:
         radius_m=_number(data, "radius_m", where, 1.0, 0.1, 50.0),
         tx_power_dbm=_number(data, "tx_power_dbm", where, -59.0, -120.0, 20.0),
         height_m=_number(data, "height_m", where, 2.9, 0.0, 20.0),
+        identity=None if data.get("identity") is None else beacon_identity(data["identity"], f"{where}.identity"),
     )
 
 
@@ -224,11 +248,12 @@ def session_from_dict(data: dict[str, Any], where: str = "session") -> Session:
     agents = tuple(_agent(a, f"{where}: agents[{i}]") for i, a in enumerate(_list(data, "agents", where)))
     if not agents:
         raise ConfigError(f"{where}: no agents (add at least one [[agents]] table)")
-    for kind, ids in (("agent", [a.id for a in agents]), ("sensor", [s.id for a in agents for s in a.sensors]),
-                      ("beacon", [b.id for b in beacons])):
+    for kind, ids in (("agent id", [a.id for a in agents]), ("sensor id", [s.id for a in agents for s in a.sensors]),
+                      ("beacon id", [b.id for b in beacons]),
+                      ("beacon identity", [b.identity for b in beacons if b.identity])):
         duplicates = sorted({item for item in ids if ids.count(item) > 1})
         if duplicates:
-            raise ConfigError(f"{where}: duplicate {kind} id {duplicates[0]!r}")
+            raise ConfigError(f"{where}: duplicate {kind} {duplicates[0]!r}")
     source = data.get("source", {})
     if not isinstance(source, dict):
         raise ConfigError(f"{where}.source: expected a table")
@@ -253,7 +278,10 @@ def to_dict(session: Session) -> dict[str, Any]:
         if isinstance(value, enum.Enum):
             return value.value
         if dataclasses.is_dataclass(value) and not isinstance(value, type):
-            return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+            fields = {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+            if isinstance(value, Beacon) and value.identity is None:
+                del fields["identity"]  # optional and newer: logs without identities stay as they were
+            return fields
         if isinstance(value, (list, tuple)):
             return [plain(v) for v in value]
         if isinstance(value, dict):

@@ -282,8 +282,9 @@ def build_parser() -> argparse.ArgumentParser:
     edge = sub.add_parser("edge", help="one chair's edge process: sensor messages in, poses out over Zenoh")
     edge.add_argument("--agent", required=True)
     edge.add_argument("--source", required=True, action="append", metavar="URL",
-                      help="mcap://SESSION.mcap (this agent's sensors), or SENSOR=serial://PORT?baud=N, once per sensor")
-    edge.add_argument("--venue", metavar="VENUE.toml", help="session description (needed with serial sources)")
+                      help="mcap://SESSION.mcap (this agent's sensors), or SENSOR=serial://PORT?baud=N or "
+                           "SENSOR=ble://ADDRESS once per sensor, plus RECEIVER=ble://scan for beacons")
+    edge.add_argument("--venue", metavar="VENUE.toml", help="session description (needed with serial and BLE sources)")
     edge.add_argument("--speed", type=float, default=1.0, help="replay sources: times real time; 0 = as fast as possible")
     edge.add_argument("--start-at", type=float, metavar="UNIX_S",
                       help="replay sources: wall-clock time of the log's first message (keeps several edges in step)")
@@ -296,7 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
     hub = sub.add_parser("hub", help="the venue's hub: every agent in, corrected poses and corrections out over Zenoh")
     hub.add_argument("--venue", required=True, metavar="VENUE.toml", help="session description (or a session log)")
     hub.add_argument("-o", "--output", metavar="FILE.mcap", help="record every input and output here")
-    hub.add_argument("--lag", type=float, default=5.0, metavar="S", help="refined track lag (default 5 s)")
+    hub.add_argument("--lag", type=float, default=30.0, metavar="S", help="refined track lag (default 30 s)")
     hub.add_argument("--pose-rate", type=float, default=50.0, metavar="HZ", help="the edges' pose rate (default 50)")
     hub.add_argument("--corrections", default="beacon,collision,fix",
                      help="comma-separated: beacon, collision, fix (default all; empty for none)")
@@ -318,7 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=1)
     demo.add_argument("--out", default="out/demo")
     demo.add_argument("--speed", type=float, default=10.0, help="times real time (default 10)")
-    demo.add_argument("--lag", type=float, default=5.0, metavar="S", help="the hub's refined-track lag (default 5 s)")
+    demo.add_argument("--lag", type=float, default=30.0, metavar="S", help="the hub's refined-track lag (default 30 s)")
     demo.set_defaults(run=run_demo)
     return parser
 

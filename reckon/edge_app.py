@@ -5,8 +5,9 @@ Source -> (raw messages published as they come: nothing received is lost) -> Cha
 `reckon/<venue>/<agent>/pose/edge`, an ImpactEvent at once on `.../event/impact`. The hub's
 Correction messages for this agent (`.../correction`) are taken between batches and applied to
 the filter. Sources: `mcap://FILE`, a session log replayed at `speed` x real time (the
-simulator's sessions, or a recording), or one x-IMU3 serial device per sensor
-(`SENSOR=serial://PORT?baud=N`, with `--venue VENUE.toml`). Each raw batch carries the venue
+simulator's sessions, or a recording); one x-IMU3 serial device per sensor
+(`SENSOR=serial://PORT?baud=N`); or BLE through bleak (`SENSOR=ble://ADDRESS`, a Thingy:52-style
+IMU, and `RECEIVER=ble://scan` for the venue's iBeacon/Eddystone beacons), with `--venue VENUE.toml`. Each raw batch carries the venue
 clock at its arrival (`received_ns`: the log time in a replay), from which the hub estimates
 the device's clock offset.
 """
@@ -233,12 +234,20 @@ class SerialSources:
 
 
 def open_sources(urls: list[str], agent_id: str, speed: float, stop: threading.Event,
-                 venue_toml: Path | None = None, reconnect_s: float = 30.0, start_at: float | None = None) -> tuple[Session, Iterable[Any]]:
+                 venue_toml: Path | None = None, reconnect_s: float = 30.0, start_at: float | None = None, *,
+                 ble_factories: dict[str, Any] | None = None) -> tuple[Session, Iterable[Any]]:
     """(session description, message stream) for `--source` URLs.
 
     `mcap://FILE`: this agent's sensors from a session log (one source; the description comes from
-    the file). `SENSOR=serial://PORT?baud=N`: one x-IMU3 device per sensor; needs `venue_toml`
-    (a TOML session description, or a session log whose description to use).
+    the file). Live devices need `venue_toml` (a TOML session description, or a session log whose
+    description to use), and are all serial or all BLE:
+    - `SENSOR=serial://PORT?baud=N`: one x-IMU3 device per sensor;
+    - `SENSOR=ble://AA:BB:CC:DD:EE:FF`: one Thingy:52 per sensor, and optionally one
+      `RECEIVER=ble://scan`: BeaconSighting messages (sensor id RECEIVER) for the venue's beacons
+      that have an `identity`.
+    Serial and BLE IMUs are not mixed on one chair: x-IMU3 samples carry the device's clock, BLE
+    notifications the host's, and the merger needs one clock. `ble_factories`: keyword arguments
+    for BleSources (`client_factory`, `scanner_factory`: fakes in tests).
     """
     if len(urls) == 1 and urlparse(urls[0]).scheme == "mcap":
         parsed = urlparse(urls[0])
@@ -246,22 +255,77 @@ def open_sources(urls: list[str], agent_id: str, speed: float, stop: threading.E
         session = session_description(venue_toml) if venue_toml else read_description(path)
         _check_agent(session, agent_id, str(path))
         return session, mcap_source(path, agent_id, speed, stop, start_at)
-    specs = []
-    for url in urls:
-        sensor_id, sep, device = url.partition("=")
-        if not sep or urlparse(device).scheme != "serial":
-            raise ConfigError(f"--source {url!r}: expected mcap://FILE (alone) or SENSOR=serial://PORT?baud=N")
-        specs.append((sensor_id, device))
+    serial, ble, scans = _live_specs(urls)
+    if serial and ble:
+        raise ConfigError(f"--source {ble[0][2]!r}: serial and BLE IMUs cannot be mixed on one chair (x-IMU3 "
+                          "samples carry the device's clock, BLE notifications the host's; make every IMU of the "
+                          "chair one kind)")
+    if serial and scans:
+        raise ConfigError(f"--source {scans[0][2]!r}: ble://scan goes with BLE IMUs only; with serial sources it is "
+                          "not supported yet")
     if venue_toml is None:
-        raise ConfigError("--venue VENUE.toml is needed with serial sources (it says which sensor is where)")
+        kind = "serial" if serial else "BLE"
+        raise ConfigError(f"--venue VENUE.toml is needed with {kind} sources (it says which sensor is where)")
     session = session_description(venue_toml)
     agent = _check_agent(session, agent_id, str(venue_toml))
     known = {s.id for s in agent.sensors}
-    for sensor_id, _ in specs:
+    for sensor_id, _, _ in serial + ble:
         if sensor_id not in known:
             raise ConfigError(f"--source {sensor_id}=...: {agent_id} has no sensor {sensor_id!r} "
                               f"(sensors: {', '.join(sorted(known))})")
-    return session, SerialSources(specs, agent_id, stop, reconnect_s)
+    if serial:
+        return session, SerialSources([(sensor_id, device) for sensor_id, device, _ in serial], agent_id, stop,
+                                      reconnect_s)
+    from edge.sources.ble_source import BleSources
+
+    beacons_by_identity = {b.identity: b.id for b in session.venue.beacons if b.identity}
+    if scans and not beacons_by_identity:
+        raise ConfigError(f"--source {scans[0][2]!r}: no beacon in {venue_toml} has an identity to listen for "
+                          "(set identity = \"ibeacon:<uuid>:<major>:<minor>\" or \"eddystone:<namespace>:<instance>\" "
+                          "in the beacon's [[venue.beacons]] table)")
+    return session, BleSources([(sensor_id, device) for sensor_id, device, _ in ble + scans], agent_id,
+                               beacons_by_identity, stop, **(ble_factories or {}))
+
+
+_LIVE_EXPECTED = ("expected mcap://FILE (alone), SENSOR=serial://PORT?baud=N, SENSOR=ble://AA:BB:CC:DD:EE:FF "
+                  "or RECEIVER=ble://scan")
+
+
+def _live_specs(urls: list[str]) -> tuple[list[tuple[str, str, str]], list[tuple[str, str, str]],
+                                          list[tuple[str, str, str]]]:
+    """(serial IMUs, BLE IMUs, BLE scans) as (sensor id, device URL, the --source URL); ConfigError
+    naming the URL for anything malformed."""
+    serial: list[tuple[str, str, str]] = []
+    ble: list[tuple[str, str, str]] = []
+    scans: list[tuple[str, str, str]] = []
+    for url in urls:
+        sensor_id, sep, device = url.partition("=")
+        scheme = urlparse(device).scheme if sep else ""
+        if scheme not in ("serial", "ble"):
+            if not sep and urlparse(url).scheme in ("serial", "ble"):
+                raise ConfigError(f"--source {url!r}: no sensor id in front; {_LIVE_EXPECTED}")
+            raise ConfigError(f"--source {url!r}: {_LIVE_EXPECTED}")
+        if scheme == "serial":
+            serial.append((sensor_id, device, url))
+            continue
+        from edge.sources.ble_source import SCAN, parse_ble_url
+
+        try:
+            address = parse_ble_url(device)
+        except ConfigError as error:
+            raise ConfigError(f"--source {url!r}: {error}") from None
+        if address == SCAN:
+            keys.check_id(sensor_id, f"--source {url!r}: the receiver id")
+            if scans:
+                raise ConfigError(f"--source {url!r}: one ble://scan per edge (already given as {scans[0][2]!r})")
+            scans.append((sensor_id, device, url))
+        else:
+            ble.append((sensor_id, device, url))
+    given = [sensor_id for sensor_id, _, _ in serial + ble]
+    twice = sorted({sensor_id for sensor_id in given if given.count(sensor_id) > 1})
+    if twice:
+        raise ConfigError(f"--source {twice[0]}=...: sensor {twice[0]!r} is given twice (one device per sensor)")
+    return serial, ble, scans
 
 
 def session_description(path: Path) -> Session:

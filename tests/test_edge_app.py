@@ -94,8 +94,12 @@ def test_poses_on_the_bus(game, tmp_path):
 def test_unknown_agent_and_scheme_are_config_errors(game):
     with pytest.raises(ConfigError, match="not in"):
         open_sources([f"mcap://{game}"], "chair99", 0.0, threading.Event())
-    with pytest.raises(ConfigError, match="expected mcap://FILE"):
+    with pytest.raises(ConfigError, match="'ble://AA:BB': no sensor id in front; expected mcap://FILE"):
         open_sources(["ble://AA:BB"], "chair01", 0.0, threading.Event())
+    with pytest.raises(ConfigError, match="'chair01-seat=ble://AA:BB': .*'AA:BB' is not a Bluetooth address"):
+        open_sources(["chair01-seat=ble://AA:BB"], "chair01", 0.0, threading.Event())
+    with pytest.raises(ConfigError, match="'chair01-seat=tcp://x': expected mcap://FILE"):
+        open_sources(["chair01-seat=tcp://x"], "chair01", 0.0, threading.Event())
     with pytest.raises(ConfigError, match="--venue VENUE.toml is needed"):
         open_sources(["chair01-seat=serial:///dev/null"], "chair01", 0.0, threading.Event())
 
@@ -139,3 +143,77 @@ def test_three_serial_devices_on_ptys_through_the_edge(game):
     assert summary.wheel_overrun == 0
     # x-IMU3 carries microseconds and float32: the same path to within millimetres
     np.testing.assert_allclose(summary.final_pose[:2], state.mean[:2], atol=0.05)
+
+
+# -- BLE sources through open_sources (the fake radio of test_ble_source) --------------------------
+
+THINGY_LEFT, THINGY_SEAT = "F1:22:33:44:55:01", "F1:22:33:44:55:03"
+
+
+def ble_venue(tmp_path, identity: str | None = None):
+    """A one-chair venue TOML with two beacons, the first with `identity` (if given)."""
+    path = tmp_path / "venue.toml"
+    line = f'identity = "{identity}"\n' if identity else ""
+    path.write_text('[venue]\nname = "court"\n'
+                    f'[[venue.beacons]]\nid = "goal-a"\nx_m = 1.575\ny_m = 7.5\n{line}'
+                    '[[venue.beacons]]\nid = "goal-b"\nx_m = 26.425\ny_m = 7.5\n'
+                    '[[agents]]\nid = "chair01"\n'
+                    '[[agents.sensors]]\nid = "chair01-left"\nmount = "left_wheel"\nspin_axis = "+z"\n'
+                    '[[agents.sensors]]\nid = "chair01-right"\nmount = "right_wheel"\nspin_axis = "-z"\n'
+                    '[[agents.sensors]]\nid = "chair01-seat"\nmount = "seat"\n')
+    return path
+
+
+def test_ble_scan_and_thingy_through_open_sources(tmp_path):
+    from test_ble_source import BEACON_UUID, FakeRadio, FakeBleakClient, ibeacon_bytes, motion_bytes
+
+    from protocol import messages
+
+    radio, stop = FakeRadio(), threading.Event()
+    venue = ble_venue(tmp_path, identity=f"ibeacon:{BEACON_UUID.upper()}:1:2")
+    session, source = open_sources([f"chair01-seat=ble://{THINGY_SEAT.lower()}", "rx=ble://scan"], "chair01", 0.0,
+                                   stop, venue_toml=venue,
+                                   ble_factories={"client_factory": radio.Client, "scanner_factory": radio.Scanner})
+    assert session.venue.beacons[0].identity == f"ibeacon:{BEACON_UUID}:1:2"
+    ready = [radio.next_ready(), radio.next_ready()]
+    client = next(r for r in ready if isinstance(r, FakeBleakClient))
+    scanner = next(r for r in ready if r is not client)
+    assert client.address == THINGY_SEAT
+    scanner.advertise("C0:00:00:00:00:01", -64, manufacturer_data={0x004C: ibeacon_bytes(1, 2)})
+    scanner.advertise("C0:00:00:00:00:02", -60, manufacturer_data={0x004C: ibeacon_bytes(1, 3)})  # not the venue's
+    client.notify(motion_bytes((0, 0, 1024), (32, 0, 0), (0, 0, 0)))
+    stop.set()
+    out = list(source)
+    assert source.join(WAIT_S)
+    sightings = [m for m in out if messages.type_name(m) == "BeaconSighting"]
+    assert [(m.agent_id, m.sensor_id, m.beacon_id, m.rssi_dbm) for m in sightings] == [
+        ("chair01", "rx", "goal-a", -64.0)]
+    batches = [m for m in out if messages.type_name(m) == "ImuBatch"]
+    assert [(b.agent_id, b.sensor_id, len(b.sample_offset_ns)) for b in batches] == [("chair01", "chair01-seat", 1)]
+
+
+def test_ble_source_configuration_errors(tmp_path):
+    import re
+
+    from test_ble_source import FakeRadio
+
+    radio, stop = FakeRadio(), threading.Event()
+    factories = {"client_factory": radio.Client, "scanner_factory": radio.Scanner}
+    venue = ble_venue(tmp_path)
+    for urls, message in (
+            (["rx=ble://scan"], rf"'rx=ble://scan': no beacon in {re.escape(str(venue))} has an identity .*"
+                                r"identity = .*\[\[venue.beacons\]\]"),
+            ([f"chair01-seat=ble://{THINGY_SEAT}", "chair01-left=serial:///dev/null"],
+             "serial and BLE IMUs cannot be mixed on one chair .*device's clock.*host's"),
+            (["rx=ble://scan", "chair01-left=serial:///dev/null"], "ble://scan goes with BLE IMUs only"),
+            ([f"chair01-seat=ble://{THINGY_SEAT}", f"chair01-seat=ble://{THINGY_LEFT}"],
+             "'chair01-seat' is given twice"),
+            ([f"chair09-seat=ble://{THINGY_SEAT}"], "chair01 has no sensor 'chair09-seat'"),
+            (["rx/1=ble://scan"], "'rx/1=ble://scan': the receiver id"),
+            ([f"chair01-seat=ble://{THINGY_SEAT}", "rx=ble://scan", "rx2=ble://scan"],
+             "'rx2=ble://scan': one ble://scan per edge")):
+        with pytest.raises(ConfigError, match=message):
+            open_sources(urls, "chair01", 0.0, stop, venue_toml=venue, ble_factories=factories)
+    with pytest.raises(ConfigError, match="--venue VENUE.toml is needed with BLE sources"):
+        open_sources([f"chair01-seat=ble://{THINGY_SEAT}"], "chair01", 0.0, stop, ble_factories=factories)
+    assert radio.made == []  # nothing was started

@@ -165,3 +165,94 @@ def test_log_is_self_describing_for_generic_protobuf_readers(tmp_path):
     first = decoded[0][3]
     assert type(first) is not messages.ImuBatch  # built from the file's descriptors, not ours
     assert first.sensor_id == "chair01-seat" and len(first.accel_g) == 60
+
+
+# -- beacon identities (the key `ble://scan` matches advertisements by) ---------------------------
+
+IDENTITY_UUID = "e2c56db5-dffb-48d2-b060-d0f5a71096e0"
+
+
+def test_beacon_identity_round_trips_through_toml_and_json(tmp_path):
+    import json
+
+    from protocol.session import to_json
+
+    path = tmp_path / "venue.toml"
+    path.write_text(f"""
+[venue]
+name = "court"
+[[venue.beacons]]
+id = "goal-a"
+x_m = 1.575
+y_m = 7.5
+identity = "iBeacon:{IDENTITY_UUID.upper()}:0001:02"
+[[venue.beacons]]
+id = "goal-b"
+x_m = 26.425
+y_m = 7.5
+identity = "EDDYSTONE:00010203040506070809:A1B2C3D4E5F6"
+[[venue.beacons]]
+id = "goal-c"
+x_m = 14.0
+y_m = 7.5
+[[agents]]
+id = "chair01"
+[[agents.sensors]]
+id = "chair01-seat"
+mount = "seat"
+""")
+    session = load_toml(path)
+    assert [b.identity for b in session.venue.beacons] == [
+        f"ibeacon:{IDENTITY_UUID}:1:2", "eddystone:00010203040506070809:a1b2c3d4e5f6", None]
+    data = to_dict(session)
+    assert [b.get("identity") for b in data["venue"]["beacons"]] == [
+        f"ibeacon:{IDENTITY_UUID}:1:2", "eddystone:00010203040506070809:a1b2c3d4e5f6", None]
+    assert "identity" not in data["venue"]["beacons"][2]  # absent, not null: older logs stay byte-identical
+    assert session_from_dict(to_dict(session)) == session
+    assert session_from_dict(json.loads(to_json(session))) == session
+
+
+def test_a_session_without_identities_serialises_as_before():
+    data = to_dict(session_from_dict(SESSION))
+    assert data["venue"]["beacons"] == [{"id": "goal-a", "x_m": 1.575, "y_m": 7.5, "radius_m": 1.0,
+                                         "tx_power_dbm": -59.0, "height_m": 2.9}]
+
+
+@pytest.mark.parametrize("identity", [
+    f"ibeacon:{IDENTITY_UUID}:1:70000", "ibeacon:1234:1:2", "eddystone:0001:a1b2c3d4e5f6", "goal_a", 3, ""])
+def test_bad_beacon_identity_names_the_key(identity):
+    import copy
+
+    data = copy.deepcopy(SESSION)
+    data["venue"]["beacons"][0]["identity"] = identity
+    with pytest.raises(ConfigError, match=r"venue\.beacons\[0\]\.identity: .* is not ibeacon:<uuid>"):
+        session_from_dict(data)
+
+
+def test_two_beacons_with_one_identity_are_refused():
+    import copy
+
+    data = copy.deepcopy(SESSION)
+    data["venue"]["beacons"] = [{"id": "goal-a", "x_m": 1.5, "y_m": 7.5, "identity": f"ibeacon:{IDENTITY_UUID}:1:2"},
+                                {"id": "goal-b", "x_m": 26.5, "y_m": 7.5, "identity": f"ibeacon:{IDENTITY_UUID}:01:2"}]
+    with pytest.raises(ConfigError, match=f"duplicate beacon identity 'ibeacon:{IDENTITY_UUID}:1:2'"):
+        session_from_dict(data)
+
+
+@pytest.mark.parametrize("text", [
+    f"ibeacon:{IDENTITY_UUID}:0:65535", f" IBEACON:{IDENTITY_UUID.upper()}:00007:0 ",
+    f"ibeacon:{IDENTITY_UUID}:1:65536",
+    "eddystone:00010203040506070809:a1b2c3d4e5f6", "eddystone:00010203040506070809:a1b2c3d4e5f", "ibeacon:x:1:2",
+    "Eddystone:AAAAAAAAAAAAAAAAAAAA:BBBBBBBBBBBB", 7, None])
+def test_identity_rule_is_the_edge_decoders_rule(text):
+    """protocol keeps its own copy of the rule (it imports nothing from edge): the two must agree."""
+    from edge.decoders.ble_adverts import normalize_identity
+    from protocol.session import beacon_identity
+
+    results = []
+    for rule in (beacon_identity, normalize_identity):
+        try:
+            results.append(rule(text, "where"))
+        except ConfigError as error:
+            results.append(str(error))
+    assert results[0] == results[1]

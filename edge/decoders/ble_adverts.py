@@ -20,7 +20,6 @@ device time, so `ThingyMotionDecoder` stamps each with the host receive time it 
 
 from __future__ import annotations
 
-import re
 import struct
 import uuid
 from dataclasses import dataclass
@@ -28,6 +27,7 @@ from typing import Any, Mapping
 
 from edge.decoders.ximu3 import MAG_UT_PER_AU, Frame, InertialFrame, MagnetometerFrame, Rejected, RejectReason
 from protocol.errors import ConfigError
+from protocol.session import beacon_identity
 
 APPLE_COMPANY_ID = 0x004C
 IBEACON_PREFIX = b"\x02\x15"  # iBeacon type, then the length of what follows (21 bytes)
@@ -44,12 +44,6 @@ COMPASS_UT_PER_LSB = 1.0 / (1 << 4)  # Q12.4
 # little, would look like repeated samples to ImuBatcher (which then closes a batch early). Up to
 # this far back, a time is moved to 1 us after the previous one instead; a larger step is kept.
 MAX_NUDGE_US = 1_000_000
-
-_IDENTITY = re.compile(
-    r"ibeacon:(?P<uuid>[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12})"
-    r":(?P<major>\d{1,5}):(?P<minor>\d{1,5})"
-    r"|eddystone:[0-9a-f]{20}:[0-9a-f]{12}")
-
 
 @dataclass(frozen=True, slots=True)
 class IBeacon:
@@ -112,16 +106,8 @@ def beacon_identities(manufacturer_data: Mapping[int, bytes], service_data: Mapp
 
 
 def normalize_identity(text: str, where: str = "beacon identity") -> str:
-    """A venue file's identity string in the canonical form above (case folded). ConfigError when
-    it is not one, naming `where` and the expected forms."""
-    folded = text.strip().lower() if isinstance(text, str) else ""
-    match = _IDENTITY.fullmatch(folded)
-    if match is None or (match["uuid"] and max(int(match["major"]), int(match["minor"])) > 0xFFFF):
-        raise ConfigError(f"{where}: {text!r} is not ibeacon:<uuid>:<major 0-65535>:<minor 0-65535> "
-                          "or eddystone:<namespace, 20 hex digits>:<instance, 12 hex digits>")
-    if match["uuid"]:  # drop leading zeros so the text equals what parse_ibeacon produces
-        return f"ibeacon:{match['uuid']}:{int(match['major'])}:{int(match['minor'])}"
-    return folded
+    """A venue file's identity string in the canonical form above (the venue file's own rule)."""
+    return beacon_identity(text, where)
 
 
 class ThingyMotionDecoder:
