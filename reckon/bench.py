@@ -27,6 +27,7 @@ import queue
 import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +47,7 @@ from protocol.session import Mount, Session
 from protocol.session_log import LogMessages, SessionWriter, iter_records, read_description, read_session
 from reckon.bus import Received, Subscription, open_session, wait_for_peers, zenoh_config
 from reckon.demo import free_endpoint
+from reckon.edge_app import mcap_source
 from reckon.evaluation.inputs import build_inputs
 from reckon.evaluation.reckon_run import merged_samples
 from sim_devices.wheelchair import simulate
@@ -84,7 +86,7 @@ def run_bench(out: Path, players: int = 10, duration_s: float = 60.0, seed: int 
     progress("bench: edge estimator (kernel and ChairEdge, one core)")
     edge = edge_throughput(game)
     progress(f"bench: pipeline, {players} edges + hub over Zenoh, unpaced")
-    pipeline = pipeline_run(game, out / "pipeline", duration_s)
+    pipeline = pipeline_run(game, out / "pipeline", duration_s, edge["startup_cpu_s"]["first_call_s"])
     latency_game = out / "latency-game.mcap"
     latency_duration = min(latency_s, duration_s)
     simulate(players, latency_duration, seed, latency_game)
@@ -92,6 +94,14 @@ def run_bench(out: Path, players: int = 10, duration_s: float = 60.0, seed: int 
     latency = latency_run(latency_game, out / "latency", latency_speed)
     progress("bench: the hub's per-message cost, from its recording")
     hub_cost = hub_profile(out / "pipeline" / "hub.mcap", read_description(game), out / "pipeline" / "rewrite.mcap")
+    hub_inputs = sum(pipeline["hub_inputs"].values())
+    hub_cost["cpu_per_input_in_run"] = 1e6 * pipeline["cpu_s"]["hub"] / max(1, hub_inputs)
+    hub_cost["zenoh_and_rest_per_input"] = hub_cost["cpu_per_input_in_run"] - hub_cost["python_per_input"]
+    per_game_s = 1e3 / duration_s
+    edge_parts = dict(edge["process_ms_per_game_s"], first_kernel_call=edge["startup_cpu_s"]["first_call_s"] * per_game_s)
+    edge_in_run = pipeline["cpu_s"]["edges_total"] / players * per_game_s
+    edge_cost = {"cpu_in_run": edge_in_run, **edge_parts, "zenoh_and_rest": edge_in_run - sum(edge_parts.values())}
+    machine["load_average_at_end"] = list(os.getloadavg())
     return {
         "edge_samples_per_s": edge["kernel_samples_per_s"],
         "pipeline_realtime_factor": pipeline["realtime_factor"],
@@ -99,8 +109,37 @@ def run_bench(out: Path, players: int = 10, duration_s: float = 60.0, seed: int 
         "rss_mb": {"edge": pipeline["rss_mb"]["edge_max"], "hub": pipeline["rss_mb"]["hub"]},
         "machine": machine,
         "details": {"players": players, "duration_s": duration_s, "seed": seed, "targets": TARGETS, "edge": edge,
-                    "pipeline": pipeline, "latency": latency, "hub_cost_us": hub_cost},
+                    "pipeline": pipeline, "latency": latency, "hub_cost_us": hub_cost,
+                    "edge_process_cpu_ms_per_game_s": edge_cost},
     }
+
+
+def format_table(result: dict[str, Any]) -> str:
+    """The four numbers against their targets, with the details that explain them."""
+    d, m = result["details"], result["machine"]
+    edge, pipe, lat, hub = d["edge"], d["pipeline"], d["latency"], d["hub_cost_us"]
+    factor, p99 = result["pipeline_realtime_factor"], result["latency_ms"]["p99"]
+
+    def verdict(ok: bool) -> str:
+        return "met" if ok else "NOT met"
+
+    return "\n".join([
+        f"reckon bench: {d['players']} chairs, {d['duration_s']:g} s game, seed {d['seed']}; {m['cpu']} "
+        f"(family/model {m['cpu_family_model']}), {m['cores']} cores, Python {m['python']}",
+        f"edge estimator (run_batch)     {result['edge_samples_per_s'] / 1e6:8.2f} M samples/s   target >= 1 M    "
+        f"{verdict(result['edge_samples_per_s'] >= TARGETS['edge_samples_per_s'])}",
+        f"  whole ChairEdge.push path    {edge['chair_edge']['chair_samples_per_s'] / 1e3:8.1f} k chair samples/s "
+        f"({edge['chair_edge']['us_per_chair_sample']:.1f} us each, merger {edge['merger']['us_per_chair_sample']:.1f} us)",
+        f"pipeline (edges + hub, Zenoh)  {factor:8.1f} x real time     target >= 100 x  {verdict(factor >= 100)}",
+        f"  CPU in the run: hub {pipe['cpu_s']['hub']:.1f} s, edges {pipe['cpu_s']['edges_total']:.1f} s; all cores busy "
+        f"would give {pipe['cpu_bound_factor']:.1f} x; hub {hub['cpu_per_input_in_run']:.0f} us CPU per input "
+        f"({hub['python_per_input']:.0f} us of it Python: decode, ChairHub, encode, record)",
+        f"latency p50 / p99              {result['latency_ms']['p50']:5.2f} / {p99:.2f} ms    target p99 <= 5 ms "
+        f"{verdict(p99 <= TARGETS['latency_p99_ms'])}",
+        f"  from the seat sample's batch {lat['from_seat_batch_ms']['p50']:5.2f} / {lat['from_seat_batch_ms']['p99']:.2f} ms "
+        f"(includes the merger waiting for both wheels' batches); {lat['processing_ms']['count']} poses",
+        f"peak RSS edge / hub            {result['rss_mb']['edge']:5.0f} / {result['rss_mb']['hub']:.0f} MiB",
+    ])
 
 
 def machine_info() -> dict[str, Any]:
@@ -180,11 +219,22 @@ def edge_throughput(game: Path) -> dict[str, Any]:
             chair.push(batch)
         chair.flush()
 
+    def source_loop() -> None:
+        for _ in mcap_source(game, agent.id, 0.0, threading.Event()):
+            pass
+
     merger_s = _best_of(merger_loop)
     edge_s = _best_of(edge_loop)
+    source_s = _best_of(source_loop, 1)
     chair = ChairEdge(agent)
-    outputs = sum(len(chair.push(batch)) for batch in batches) + len(chair.flush())
+    produced = [out for batch in batches for out in chair.push(batch)] + chair.flush()
+    outputs = len(produced)
     merged = chair.samples
+    began = time.perf_counter()
+    for message in [*batches, *produced]:  # what the edge publishes: every raw batch, every output
+        wire.encode(message)
+    encode_s = time.perf_counter() - began
+    game_s = (times[-1] - times[0]) * 1e-9
     return {
         "agent": agent.id, "kernel_samples": repeats * len(times), "kernel_samples_per_s": repeats * len(times) / kernel_s,
         "kernel_per_pose_call": {"samples_per_call": per_pose, "samples_per_s": len(times) / sliced_s,
@@ -194,7 +244,29 @@ def edge_throughput(game: Path) -> dict[str, Any]:
                        "us_per_chair_sample": 1e6 * edge_s / merged},
         "merger": {"chair_samples_per_s": merged / merger_s, "us_per_chair_sample": 1e6 * merger_s / merged,
                    "share_of_chair_edge": merger_s / edge_s},
+        # an edge process's work per game second, besides Zenoh's own cost (ms of one core)
+        "process_ms_per_game_s": {"replay_source": 1e3 * source_s / game_s, "chair_edge": 1e3 * edge_s / game_s,
+                                  "encode": 1e3 * encode_s / game_s},
+        "startup_cpu_s": startup_probe(),
     }
+
+
+def startup_probe() -> dict[str, float]:
+    """CPU seconds an edge process spends on its imports, and on its first kernel call (numba loads
+    the compiled code from its cache then), measured in a fresh interpreter."""
+    code = ("import time\n"
+            "import numpy as np, zenoh, reckon.edge_app\n"
+            "from edge import chair_kernel as k\n"
+            "from edge.chair_estimator import ChairSettings\n"
+            "imported = time.process_time()\n"
+            "k.run_batch(k.pack_settings(ChairSettings()), np.zeros(k.STATE_SIZE), np.zeros(0, np.int64),"
+            " np.zeros((0, k.SAMPLE_WIDTH)))\n"
+            "print(imported, time.process_time() - imported)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise ReckonError(f"bench: the start-up probe exited with {done.returncode}: {done.stderr.strip()[-300:]}")
+    imports_s, first_call_s = (float(word) for word in done.stdout.split())
+    return {"imports_s": imports_s, "first_call_s": first_call_s}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -204,12 +276,16 @@ def edge_throughput(game: Path) -> dict[str, Any]:
 @dataclass
 class Exited:
     returncode: int
-    max_rss_mb: float  # ru_maxrss: the process's peak resident set
-    cpu_s: float  # user + system
+    max_rss_mb: float  # VmHWM: the process's peak resident set, MiB
+    cpu_s: float  # user + system, from wait4
 
 
 class _Child:
-    """A `reckon` subprocess reaped with wait4, which hands back its peak RSS and CPU time."""
+    """A `reckon` subprocess whose peak RSS is read from /proc while it runs, reaped with wait4 (CPU time).
+
+    Not wait4's ru_maxrss: Linux carries the parent's peak across fork and exec into it, so every
+    child would report at least this (bigger) process's RSS.
+    """
 
     def __init__(self, name: str, arguments: list[str], log_path: Path):
         self.name, self.log_path = name, log_path
@@ -217,13 +293,16 @@ class _Child:
             self.process = subprocess.Popen([sys.executable, "-m", "reckon.cli", "-q", *arguments],
                                             stdout=log_file, stderr=subprocess.STDOUT)
         self.exited: Exited | None = None
+        self.peak_kb = 0
 
     def poll(self) -> Exited | None:
+        """None while it runs (noting its peak RSS so far: the last note before it exits is the result)."""
         if self.exited is None:
+            self.peak_kb = max(self.peak_kb, _vm_hwm_kb(self.process.pid))
             pid, status, usage = os.wait4(self.process.pid, os.WNOHANG)
             if pid:
                 self.process.returncode = os.waitstatus_to_exitcode(status)
-                self.exited = Exited(self.process.returncode, usage.ru_maxrss / 1024.0, usage.ru_utime + usage.ru_stime)
+                self.exited = Exited(self.process.returncode, self.peak_kb / 1024.0, usage.ru_utime + usage.ru_stime)
         return self.exited
 
     def wait(self, timeout_s: float) -> Exited:
@@ -237,9 +316,29 @@ class _Child:
             raise ReckonError(f"bench: {self.name} exited with {exited.returncode}; see {self.log_path}")
         return exited
 
+    def cpu_s(self) -> float:
+        """CPU seconds (user + system) used so far, while it runs."""
+        try:
+            fields = Path(f"/proc/{self.process.pid}/stat").read_text().rpartition(")")[2].split()
+        except OSError:
+            return math.nan
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime: fields 14, 15
+
     def interrupt(self) -> None:
         if self.poll() is None:
             self.process.send_signal(signal.SIGINT)
+
+
+def _vm_hwm_kb(pid: int) -> int:
+    """Peak resident set of a running process (kB), 0 once it has exited."""
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1])
+    except OSError:
+        pass
+    return 0
 
 
 @dataclass
@@ -253,6 +352,9 @@ class Play:
     edges: dict[str, Exited]
     recording: Path
     hub_summary: str
+    cpu_at_start: dict[str, float]  # "hub" and agent ids: CPU seconds used before start_at (start-up)
+    system_busy_s: float  # CPU seconds the whole machine was busy from start_at to the hub's exit
+    own_cpu_s: float  # of which this process (watching)
     received: list[Received] = field(default_factory=list)
 
 
@@ -285,12 +387,19 @@ def play(game: Path, folder: Path, speed: float, selectors: tuple[str, ...] = ()
                         logs / f"edge-{agent.id}.log")
                 wait_for_peers(bus, wire.alive_selector(venue, wire.Role.EDGE), len(edges), 60.0)
                 edges_up_ns = time.time_ns()
-                while any(edge.poll() is None for edge in edges.values()):
-                    _collect(subscription, received, 0.01)
+                time.sleep(max(0.0, start_at - 0.05 - time.time()))  # everyone is idle, waiting for start_at
+                cpu_at_start = {name: child.cpu_s() for name, child in [("hub", hub), *edges.items()]}
+                busy_at_start, own_at_start = _system_busy_s(), time.process_time()
+                while True:
+                    hub.poll()  # notes its peak RSS so far
+                    if all([edge.poll() is not None for edge in edges.values()]):  # a list: poll every one
+                        break
+                    _collect(subscription, received, 0.01 if subscription else 0.05)
                 edges_done_ns = time.time_ns()
                 hub.interrupt()  # the edges' flush barrier answered: the hub holds all their samples
                 while hub.poll() is None:
                     _collect(subscription, received, 0.01)
+                busy_s, own_s = _system_busy_s() - busy_at_start, time.process_time() - own_at_start
                 while _collect(subscription, received, 0.2):
                     pass
             finally:
@@ -303,7 +412,16 @@ def play(game: Path, folder: Path, speed: float, selectors: tuple[str, ...] = ()
     hub_exited = hub.wait(EXIT_TIMEOUT_S)
     summary = (logs / "hub.log").read_text(errors="replace").strip().splitlines()
     return Play(int(start_at * 1e9), edges_up_ns, edges_done_ns, hub_exited, exited, recording,
-                summary[-1] if summary else "", received)
+                summary[-1] if summary else "", cpu_at_start, busy_s, own_s, received)
+
+
+def _system_busy_s() -> float:
+    """CPU seconds all cores have spent not idle since boot (/proc/stat), to notice foreign load."""
+    try:
+        fields = [int(word) for word in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    except (OSError, ValueError):
+        return math.nan
+    return (sum(fields[:8]) - fields[3] - fields[4]) / os.sysconf("SC_CLK_TCK")  # minus idle and iowait
 
 
 def _collect(subscription: Subscription | None, into: list[Received], timeout_s: float) -> bool:
@@ -328,21 +446,29 @@ def _collect(subscription: Subscription | None, into: list[Received], timeout_s:
 # 2. and 4. The unpaced pipeline
 
 
-def pipeline_run(game: Path, folder: Path, game_s: float) -> dict[str, Any]:
+def pipeline_run(game: Path, folder: Path, game_s: float, first_call_cpu_s: float = 0.0) -> dict[str, Any]:
+    """The unpaced run. Its CPU time from `--start-at` on also gives the best factor this work
+    allows on this machine's cores (all of them busy throughout), and the same without each
+    edge's first kernel call (`first_call_cpu_s`: numba loading its cache, on the first sample)."""
     run = play(game, folder, UNPACED_SPEED)
     timeline = hub_timeline(run.recording)
     end_ns = max(timeline["last_live_ns"], timeline["last_input_ns"])
     wall_s = (end_ns - run.start_at_ns) * 1e-9
     edge_rss = [e.max_rss_mb for e in run.edges.values()]
-    edge_cpu = [e.cpu_s for e in run.edges.values()]
+    edge_cpu = [e.cpu_s - run.cpu_at_start[agent_id] for agent_id, e in run.edges.items()]
+    hub_cpu = run.hub.cpu_s - run.cpu_at_start["hub"]
+    cores = len(os.sched_getaffinity(0))
     return {
         "realtime_factor": game_s / wall_s, "game_s": game_s, "wall_s": wall_s,
         "edges_wall_s": (run.edges_done_ns - run.start_at_ns) * 1e-9,
         "edges_late_s": max(0.0, (run.edges_up_ns - run.start_at_ns) * 1e-9),
-        "hub_first_input_after_start_s": (timeline["first_input_ns"] - run.start_at_ns) * 1e-9,
         "hub_inputs": timeline["inputs"], "hub_outputs": timeline["outputs"],
         "hub_wall_us_per_input": 1e6 * wall_s / max(1, sum(timeline["inputs"].values())),
-        "cpu_s": {"hub": run.hub.cpu_s, "edges_total": sum(edge_cpu), "edge_max": max(edge_cpu)},
+        "cpu_s": {"hub": hub_cpu, "edges_total": sum(edge_cpu), "edge_max": max(edge_cpu),
+                  "startup_before_start_at": sum(run.cpu_at_start.values()), "bench_process": run.own_cpu_s,
+                  "other_processes": run.system_busy_s - hub_cpu - sum(edge_cpu) - run.own_cpu_s},
+        "cpu_bound_factor": game_s * cores / (hub_cpu + sum(edge_cpu)),
+        "cpu_bound_factor_warm": game_s * cores / (hub_cpu + sum(edge_cpu) - len(edge_cpu) * first_call_cpu_s),
         "rss_mb": {"hub": run.hub.max_rss_mb, "edge_max": max(edge_rss), "edge_mean": sum(edge_rss) / len(edge_rss)},
         "hub_summary": run.hub_summary,
     }
@@ -392,7 +518,9 @@ def latency_run(game: Path, folder: Path, speed: float) -> dict[str, Any]:
     run = play(game, folder, speed, selectors)
     result = latencies(run.received, session)
     result.update(speed=speed, rss_mb={"hub": run.hub.max_rss_mb, "edge_max": max(e.max_rss_mb for e in run.edges.values())},
-                  cpu_s={"hub": run.hub.cpu_s, "edges_total": sum(e.cpu_s for e in run.edges.values())},
+                  cpu_s={"hub": run.hub.cpu_s - run.cpu_at_start["hub"],
+                         "edges_total": sum(e.cpu_s - run.cpu_at_start[a] for a, e in run.edges.items()),
+                         "bench_process": run.own_cpu_s, "machine_busy": run.system_busy_s},
                   hub_summary=run.hub_summary)
     return result
 
