@@ -12,8 +12,11 @@
    pose of the hub, its arrival here minus the arrival here of the raw ImuBatch whose push made
    the edge emit the pose (the batch that completed the pose's inputs). So it is the processing
    path edge -> Zenoh -> hub -> Zenoh, not the sensors' batching or the wait for the next pose tick.
-4. `rss_mb`: peak resident memory (the kernel's `ru_maxrss` from `wait4`) of the largest edge
-   process and of the hub, in the unpaced pipeline run.
+4. `rss_mb`: peak resident memory (VmHWM, read from /proc while they run) of the largest edge
+   process and of the hub, in the unpaced pipeline run. MiB.
+
+`details` holds what explains them: CPU seconds per process, the hub's Python cost per message
+(its recorded inputs fed again to a ChairHub), the edge's per game second. docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+from mcap.records import Channel, Message, Schema
 
 from edge import chair_kernel as kernel
 from edge.chair_edge import ChairEdge
@@ -61,6 +65,8 @@ LATENCY_SPEED = 1.0  # its pace, times real time
 WARMUP_S = 2.0  # each agent's first poses of the paced run, left out of the percentiles (first numba call)
 START_S_PER_EDGE = 0.5  # start-up allowance per edge process on 2 cores (imports, numba cache, zenoh)
 EXIT_TIMEOUT_S = 300.0
+POLL_S = 0.05  # how often the processes' peak RSS is read, and what arrived here is taken, while they run
+SUBSCRIPTION_CAPACITY = 16384  # samples between two takes: ~1,300 a second arrive with 10 chairs
 HUB_INPUTS = ("imu", "beacon", "pose/edge", "event", "fix")
 
 
@@ -69,12 +75,13 @@ HUB_INPUTS = ("imu", "beacon", "pose/edge", "event", "fix")
 
 
 def run_bench(out: Path, players: int = 10, duration_s: float = 60.0, seed: int = 1,
-              progress: Callable[[str], None] = print, *, latency_s: float = LATENCY_S,
-              latency_speed: float = LATENCY_SPEED) -> dict[str, Any]:
+              progress: Callable[[str], None] = print, *, latency_players: int | None = None,
+              latency_s: float = LATENCY_S, latency_speed: float = LATENCY_SPEED) -> dict[str, Any]:
     """Simulate a game into `out`, measure the four numbers, return them (JSON-able).
 
     Keys: edge_samples_per_s, pipeline_realtime_factor, latency_ms {p50, p99}, rss_mb {edge, hub},
-    machine, details. The paced latency run replays its own game of min(latency_s, duration_s) s.
+    machine, details. The paced latency run replays its own game: `latency_players` chairs (default
+    `players`) for min(latency_s, duration_s) s at `latency_speed` x real time.
     ReckonError if a process fails (its log is in `out`/<run>/logs).
     """
     out = Path(out)
@@ -89,16 +96,19 @@ def run_bench(out: Path, players: int = 10, duration_s: float = 60.0, seed: int 
     pipeline = pipeline_run(game, out / "pipeline", duration_s, edge["startup_cpu_s"]["first_call_s"])
     latency_game = out / "latency-game.mcap"
     latency_duration = min(latency_s, duration_s)
-    simulate(players, latency_duration, seed, latency_game)
-    progress(f"bench: latency, {players} chairs for {latency_duration:g} s at {latency_speed:g} x real time")
+    latency_players = latency_players or players
+    simulate(latency_players, latency_duration, seed, latency_game)
+    progress(f"bench: latency, {latency_players} chairs for {latency_duration:g} s at {latency_speed:g} x real time")
     latency = latency_run(latency_game, out / "latency", latency_speed)
+    latency["game_s"] = latency_duration
     progress("bench: the hub's per-message cost, from its recording")
     hub_cost = hub_profile(out / "pipeline" / "hub.mcap", read_description(game), out / "pipeline" / "rewrite.mcap")
     hub_inputs = sum(pipeline["hub_inputs"].values())
     hub_cost["cpu_per_input_in_run"] = 1e6 * pipeline["cpu_s"]["hub"] / max(1, hub_inputs)
     hub_cost["zenoh_and_rest_per_input"] = hub_cost["cpu_per_input_in_run"] - hub_cost["python_per_input"]
     per_game_s = 1e3 / duration_s
-    edge_parts = dict(edge["process_ms_per_game_s"], first_kernel_call=edge["startup_cpu_s"]["first_call_s"] * per_game_s)
+    edge_parts = dict(edge["process_ms_per_game_s"],
+                      first_kernel_call=edge["startup_cpu_s"]["first_call_s"] * per_game_s)
     edge_in_run = pipeline["cpu_s"]["edges_total"] / players * per_game_s
     edge_cost = {"cpu_in_run": edge_in_run, **edge_parts, "zenoh_and_rest": edge_in_run - sum(edge_parts.values())}
     machine["load_average_at_end"] = list(os.getloadavg())
@@ -129,14 +139,17 @@ def format_table(result: dict[str, Any]) -> str:
         f"edge estimator (run_batch)     {result['edge_samples_per_s'] / 1e6:8.2f} M samples/s   target >= 1 M    "
         f"{verdict(result['edge_samples_per_s'] >= TARGETS['edge_samples_per_s'])}",
         f"  whole ChairEdge.push path    {edge['chair_edge']['chair_samples_per_s'] / 1e3:8.1f} k chair samples/s "
-        f"({edge['chair_edge']['us_per_chair_sample']:.1f} us each, merger {edge['merger']['us_per_chair_sample']:.1f} us)",
+        f"({edge['chair_edge']['us_per_chair_sample']:.1f} us each, "
+        f"merger {edge['merger']['us_per_chair_sample']:.1f} us)",
         f"pipeline (edges + hub, Zenoh)  {factor:8.1f} x real time     target >= 100 x  {verdict(factor >= 100)}",
-        f"  CPU in the run: hub {pipe['cpu_s']['hub']:.1f} s, edges {pipe['cpu_s']['edges_total']:.1f} s; all cores busy "
+        f"  CPU in the run: hub {pipe['cpu_s']['hub']:.1f} s, edges {pipe['cpu_s']['edges_total']:.1f} s; "
+        "all cores busy "
         f"would give {pipe['cpu_bound_factor']:.1f} x; hub {hub['cpu_per_input_in_run']:.0f} us CPU per input "
         f"({hub['python_per_input']:.0f} us of it Python: decode, ChairHub, encode, record)",
         f"latency p50 / p99              {result['latency_ms']['p50']:5.2f} / {p99:.2f} ms    target p99 <= 5 ms "
         f"{verdict(p99 <= TARGETS['latency_p99_ms'])}",
-        f"  from the seat sample's batch {lat['from_seat_batch_ms']['p50']:5.2f} / {lat['from_seat_batch_ms']['p99']:.2f} ms "
+        f"  from the seat sample's batch {lat['from_seat_batch_ms']['p50']:5.2f} / "
+        f"{lat['from_seat_batch_ms']['p99']:.2f} ms "
         f"(includes the merger waiting for both wheels' batches); {lat['processing_ms']['count']} poses",
         f"peak RSS edge / hub            {result['rss_mb']['edge']:5.0f} / {result['rss_mb']['hub']:.0f} MiB",
     ])
@@ -157,8 +170,9 @@ def machine_info() -> dict[str, Any]:
             versions[package] = importlib.metadata.version(package)
         except importlib.metadata.PackageNotFoundError:
             versions[package] = None
-    return {"cpu": cpu.get("model name", platform.processor()), "cpu_family_model": f"{cpu.get('cpu family')}/{cpu.get('model')}",
-            "cpu_mhz": cpu.get("cpu MHz"), "cores": len(os.sched_getaffinity(0)), "python": platform.python_version(),
+    return {"cpu": cpu.get("model name", platform.processor()),
+            "cpu_family_model": f"{cpu.get('cpu family')}/{cpu.get('model')}", "cpu_mhz": cpu.get("cpu MHz"),
+            "cores": len(os.sched_getaffinity(0)), "python": platform.python_version(),
             "platform": platform.platform(), "packages": versions, "load_average_at_start": list(os.getloadavg())}
 
 
@@ -236,7 +250,8 @@ def edge_throughput(game: Path) -> dict[str, Any]:
     encode_s = time.perf_counter() - began
     game_s = (times[-1] - times[0]) * 1e-9
     return {
-        "agent": agent.id, "kernel_samples": repeats * len(times), "kernel_samples_per_s": repeats * len(times) / kernel_s,
+        "agent": agent.id, "kernel_samples": repeats * len(times),
+        "kernel_samples_per_s": repeats * len(times) / kernel_s,
         "kernel_per_pose_call": {"samples_per_call": per_pose, "samples_per_s": len(times) / sliced_s,
                                  "us_per_call": 1e6 * sliced_s / len(slices)},
         "chair_edge": {"batches": len(batches), "raw_samples": raw_samples, "chair_samples": merged, "outputs": outputs,
@@ -305,15 +320,14 @@ class _Child:
                 self.exited = Exited(self.process.returncode, self.peak_kb / 1024.0, usage.ru_utime + usage.ru_stime)
         return self.exited
 
-    def wait(self, timeout_s: float) -> Exited:
+    def reap(self, timeout_s: float) -> Exited:
+        """Wait for the exit, killing it after `timeout_s`."""
         deadline = time.monotonic() + timeout_s
         while (exited := self.poll()) is None:
             if time.monotonic() > deadline:
                 self.process.kill()
                 deadline = math.inf
             time.sleep(0.005)
-        if exited.returncode != 0:
-            raise ReckonError(f"bench: {self.name} exited with {exited.returncode}; see {self.log_path}")
         return exited
 
     def cpu_s(self) -> float:
@@ -377,7 +391,7 @@ def play(game: Path, folder: Path, speed: float, selectors: tuple[str, ...] = ()
     try:
         with open_session(zenoh_config(listen=[bench_endpoint], connect=[hub_endpoint])) as bus:
             wait_for_peers(bus, wire.alive_selector(venue, wire.Role.HUB), 1, 60.0)
-            subscription = Subscription(bus, list(selectors)) if selectors else None
+            subscription = Subscription(bus, list(selectors), capacity=SUBSCRIPTION_CAPACITY) if selectors else None
             try:
                 start_at = time.time() + 1.0 + START_S_PER_EDGE * len(session.agents)
                 for agent in session.agents:
@@ -394,11 +408,11 @@ def play(game: Path, folder: Path, speed: float, selectors: tuple[str, ...] = ()
                     hub.poll()  # notes its peak RSS so far
                     if all([edge.poll() is not None for edge in edges.values()]):  # a list: poll every one
                         break
-                    _collect(subscription, received, 0.01 if subscription else 0.05)
+                    _collect(subscription, received, POLL_S)
                 edges_done_ns = time.time_ns()
                 hub.interrupt()  # the edges' flush barrier answered: the hub holds all their samples
                 while hub.poll() is None:
-                    _collect(subscription, received, 0.01)
+                    _collect(subscription, received, POLL_S)
                 busy_s, own_s = _system_busy_s() - busy_at_start, time.process_time() - own_at_start
                 while _collect(subscription, received, 0.2):
                     pass
@@ -406,10 +420,16 @@ def play(game: Path, folder: Path, speed: float, selectors: tuple[str, ...] = ()
                 if subscription is not None:
                     subscription.close()
     finally:
-        for child in [*edges.values(), hub]:
+        children = [*edges.values(), hub]
+        for child in children:
             child.interrupt()
-    exited = {agent_id: edge.wait(EXIT_TIMEOUT_S) for agent_id, edge in edges.items()}
-    hub_exited = hub.wait(EXIT_TIMEOUT_S)
+        for child in children:
+            child.reap(EXIT_TIMEOUT_S)
+    for child in children:
+        if child.exited is not None and child.exited.returncode != 0:
+            raise ReckonError(f"bench: {child.name} exited with {child.exited.returncode}; see {child.log_path}")
+    exited = {agent_id: edge.reap(0) for agent_id, edge in edges.items()}
+    hub_exited = hub.reap(0)
     summary = (logs / "hub.log").read_text(errors="replace").strip().splitlines()
     return Play(int(start_at * 1e9), edges_up_ns, edges_done_ns, hub_exited, exited, recording,
                 summary[-1] if summary else "", cpu_at_start, busy_s, own_s, received)
@@ -424,22 +444,24 @@ def _system_busy_s() -> float:
     return (sum(fields[:8]) - fields[3] - fields[4]) / os.sysconf("SC_CLK_TCK")  # minus idle and iowait
 
 
-def _collect(subscription: Subscription | None, into: list[Received], timeout_s: float) -> bool:
-    """Move what has arrived into `into`, waiting up to `timeout_s` for the first; False if none came."""
-    if subscription is None:
-        time.sleep(timeout_s)
-        return False
-    try:
-        item = subscription.get(timeout=timeout_s)
-    except queue.Empty:
-        return False
-    while item is not None:
-        into.append(item)
+def _collect(subscription: Subscription | None, into: list[Received], duration_s: float) -> int:
+    """Sleep `duration_s`, then move what arrived meanwhile into `into`; how many came.
+
+    The subscription's drain threads stamp each arrival as it happens; taking the samples in
+    batches keeps this process from waking up for every one (it shares the cores it measures).
+    """
+    time.sleep(duration_s)
+    count = 0
+    while subscription is not None:
         try:
             item = subscription.get(timeout=0)
         except queue.Empty:
             break
-    return True
+        if item is None:
+            break
+        into.append(item)
+        count += 1
+    return count
 
 
 # ---------------------------------------------------------------------------------------------
@@ -481,8 +503,6 @@ def _stream(topic: str) -> str:
 
 def hub_timeline(recording: Path) -> dict[str, Any]:
     """Log times of the hub's recording: inputs carry their arrival, outputs their publication."""
-    from mcap.records import Channel, Message
-
     problems: list[str] = []
     streams: dict[int, str] = {}
     inputs: dict[str, int] = {}
@@ -514,11 +534,17 @@ def hub_timeline(recording: Path) -> dict[str, Any]:
 def latency_run(game: Path, folder: Path, speed: float) -> dict[str, Any]:
     session = read_description(game)
     venue = session.venue.name
-    selectors = (keys.all_agents(venue, "imu/*"), keys.all_agents(venue, "pose/edge"), keys.all_agents(venue, "pose/live"))
+    selectors = tuple(keys.all_agents(venue, stream) for stream in ("imu/*", "pose/edge", "pose/live"))
     run = play(game, folder, speed, selectors)
     result = latencies(run.received, session)
-    result.update(speed=speed, rss_mb={"hub": run.hub.max_rss_mb, "edge_max": max(e.max_rss_mb for e in run.edges.values())},
-                  cpu_s={"hub": run.hub.cpu_s - run.cpu_at_start["hub"],
+    hub_inputs = sum(hub_timeline(run.recording)["inputs"].values())
+    hub_cpu = run.hub.cpu_s - run.cpu_at_start["hub"]
+    # what one sample arriving on its own costs to take in through `Subscription`, here and in the hub
+    result["receive_cpu_us"] = {"hub_per_input": 1e6 * hub_cpu / max(1, hub_inputs),
+                                "bench_per_sample": 1e6 * run.own_cpu_s / max(1, len(run.received))}
+    result.update(players=len(session.agents), speed=speed,
+                  rss_mb={"hub": run.hub.max_rss_mb, "edge_max": max(e.max_rss_mb for e in run.edges.values())},
+                  cpu_s={"hub": hub_cpu,
                          "edges_total": sum(e.cpu_s - run.cpu_at_start[a] for a, e in run.edges.items()),
                          "bench_process": run.own_cpu_s, "machine_busy": run.system_busy_s},
                   hub_summary=run.hub_summary)
@@ -610,8 +636,6 @@ def latencies(received: list[Received], session: Session, warmup_s: float = WARM
 
 def hub_profile(recording: Path, session: Session, scratch: Path) -> dict[str, Any]:
     """Feed the hub's recorded inputs, in order, to a fresh ChairHub: mean microseconds per step."""
-    from mcap.records import Channel, Message, Schema
-
     problems: list[str] = []
     names: dict[int, str] = {}
     channels: dict[int, tuple[str, str]] = {}

@@ -221,6 +221,15 @@ def run_demo(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     return run_eval(eval_args, progress)
 
 
+def run_bench_command(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from reckon.bench import format_table, run_bench
+
+    result = run_bench(Path(args.out), players=args.players, duration_s=args.duration, seed=args.seed,
+                       progress=progress, latency_players=args.latency_players)
+    print(json.dumps(result, indent=1) if args.json else format_table(result))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="reckon", description="Multi-agent inertial positioning for sports venues.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
@@ -321,6 +330,14 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--speed", type=float, default=10.0, help="times real time (default 10)")
     demo.add_argument("--lag", type=float, default=30.0, metavar="S", help="the hub's refined-track lag (default 30 s)")
     demo.set_defaults(run=run_demo)
+    bench = sub.add_parser("bench", help="measure the edge estimator, the live pipeline, latency and memory here")
+    bench.add_argument("--players", type=int, default=10)
+    bench.add_argument("--duration", type=float, default=60.0, help="game seconds of the unpaced run (default 60)")
+    bench.add_argument("--seed", type=int, default=1)
+    bench.add_argument("--latency-players", type=int, metavar="N", help="chairs in the paced latency run (default: --players)")
+    bench.add_argument("--out", default="out/bench", help="folder for the games, the hub's recordings and the process logs")
+    bench.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    bench.set_defaults(run=run_bench_command)
     return parser
 
 
