@@ -38,6 +38,9 @@ class ChairEdge:
         self.method = method
         self.period_ns = int(1e9 / pose_rate_hz)
         self.packed_settings = kernel.pack_settings(self.settings)
+        # load (or compile) the kernel now, not on the first sample of a live stream
+        kernel.run_batch(self.packed_settings, np.zeros(kernel.STATE_SIZE), np.zeros(0, dtype=np.int64),
+                         np.zeros((0, kernel.SAMPLE_WIDTH)))
         self.vector: np.ndarray | None = None  # the filter state, packed (fixed size)
         self.next_pose_ns = 0
         self.corrections: deque[Any] = deque(maxlen=64)  # the hub sends a few per minute
