@@ -85,7 +85,9 @@ class AgentView:
     pending: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (sequence, expected shift)
     sequence: int = 0  # last Correction sent
     acknowledged: int = 0
-    passes: dict[str, _Pass] = field(default_factory=dict)
+    passes: dict[str, _Pass] = field(default_factory=dict)  # open, per beacon
+    ended: deque = field(default_factory=lambda: deque(maxlen=16))  # (beacon, pass) awaiting poses past the peak
+    fixes: deque = field(default_factory=lambda: deque(maxlen=16))  # PositionFix awaiting poses past its time
     applied: dict[str, int] = field(default_factory=lambda: {name: 0 for name in CORRECTIONS})
     poses: int = 0
 
@@ -192,15 +194,17 @@ class ChairHub:
             return []
         view = self.agents[sighting.agent_id]
         time_ns = self.clocks.to_venue(sighting.sensor_id or view.seat_id, sighting.timestamp_ns)
-        out = self._end_passes(view, time_ns)
         current = view.passes.get(sighting.beacon_id)
+        if current is not None and time_ns - current.last_ns > self.settings.pass_end_s * 1e9:
+            view.ended.append((sighting.beacon_id, view.passes.pop(sighting.beacon_id)))
+            current = None
         if current is None:
             view.passes[sighting.beacon_id] = _Pass(sighting.rssi_dbm, time_ns, time_ns)
         else:
             current.last_ns = max(current.last_ns, time_ns)
             if sighting.rssi_dbm > current.peak_rssi:
                 current.peak_rssi, current.peak_ns = sighting.rssi_dbm, time_ns
-        return out
+        return self._end_passes(view)
 
     def on_fix(self, fix: Any) -> list[Any]:
         if "fix" not in self.settings.corrections:
@@ -211,7 +215,8 @@ class ChairHub:
             raise ValueError(f"PositionFix for {fix.agent_id}: covariance {list(fix.covariance)} is not a 2 x 2 "
                              "positive-definite matrix")
         kind = Kind(fix.kind) if fix.kind in (Kind.VIDEO, Kind.MANUAL) else Kind.MANUAL
-        return self._absolute(view, fix.timestamp_ns, np.array([fix.x_m, fix.y_m]), covariance, kind, fix.source_id)
+        view.fixes.append((fix.timestamp_ns, np.array([fix.x_m, fix.y_m]), covariance, kind, fix.source_id))
+        return self._end_passes(view)
 
     def flush(self) -> list[Any]:
         """End of session: refined poses still inside the lag."""
@@ -222,16 +227,25 @@ class ChairHub:
 
     # -- corrections ---------------------------------------------------------------------------
 
-    def _end_passes(self, view: AgentView, now_ns: int | None = None) -> list[Any]:
-        now_ns = view.latest_ns if now_ns is None else max(now_ns, view.latest_ns or now_ns)
-        out = []
+    def _end_passes(self, view: AgentView) -> list[Any]:
+        """Fixes of passes that are over, once the agent's poses have reached their peaks.
+
+        Pose time, not sighting time, decides: the bus does not keep an agent's sightings and
+        poses in order, and a fix needs the pose the chair had at the peak.
+        """
+        if view.latest_ns is None:
+            return []
         for beacon_id, current in list(view.passes.items()):
-            if now_ns - current.last_ns <= self.settings.pass_end_s * 1e9:
-                continue
-            del view.passes[beacon_id]
-            fix = beacon_fix(self.beacons[beacon_id], current.peak_rssi)
+            if view.latest_ns - current.last_ns > self.settings.pass_end_s * 1e9:
+                view.ended.append((beacon_id, view.passes.pop(beacon_id)))
+        out = []
+        while view.ended and view.ended[0][1].peak_ns <= view.latest_ns:
+            beacon_id, ended = view.ended.popleft()
+            fix = beacon_fix(self.beacons[beacon_id], ended.peak_rssi)
             if fix is not None:
-                out += self._absolute(view, current.peak_ns, fix.xy, fix.covariance, Kind.BEACON, beacon_id)
+                out += self._absolute(view, ended.peak_ns, fix.xy, fix.covariance, Kind.BEACON, beacon_id)
+        while view.fixes and view.fixes[0][0] <= view.latest_ns:
+            out += self._absolute(view, *view.fixes.popleft())
         return out
 
     def _absolute(self, view: AgentView, time_ns: int, xy: np.ndarray, covariance: np.ndarray, kind: Kind,

@@ -327,7 +327,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--duration", type=float, default=317.0)
     demo.add_argument("--seed", type=int, default=1)
     demo.add_argument("--out", default="out/demo")
-    demo.add_argument("--speed", type=float, default=10.0, help="times real time (default 10)")
+    demo.add_argument("--speed", type=float, default=3.0,
+                      help="times real time (default 3; a 2-core machine keeps up to about 6, docs/benchmarks.md)")
     demo.add_argument("--lag", type=float, default=30.0, metavar="S", help="the hub's refined-track lag (default 30 s)")
     demo.set_defaults(run=run_demo)
     bench = sub.add_parser("bench", help="measure the edge estimator, the live pipeline, latency and memory here")

@@ -34,6 +34,7 @@ from reckon.bus import open_session, wait_for_peers, zenoh_config
 
 START_DELAY_S = 3.0  # time for the edge processes to start (Python, numpy, zenoh) before the first sample
 TABLE_EVERY_S = 2.0
+BEHIND_WARN_S = 5.0
 SCORE_HZ = 10.0
 
 
@@ -111,9 +112,15 @@ class CourtView:
         self.corrections_sub.undeclare()
 
 
-def table(session: Session, view: CourtView, truth: dict[str, Track], game_start_ns: int, duration_s: float) -> str:
+def table(session: Session, view: CourtView, truth: dict[str, Track], game_start_ns: int, duration_s: float,
+          expected_s: float) -> str:
     newest = max((pose[0] for pose in view.poses.values()), default=game_start_ns)
-    lines = [f"game time {(newest - game_start_ns) * 1e-9:6.1f} / {duration_s:.0f} s",
+    shown_s = (newest - game_start_ns) * 1e-9
+    behind = ""
+    if expected_s - shown_s > BEHIND_WARN_S and shown_s < duration_s - 1.0:
+        behind = (f"  (behind the devices by {expected_s - shown_s:.0f} s: this machine cannot keep up with "
+                  "this --speed, and the bus may drop links it holds blocked for 5 s)")
+    lines = [f"game time {shown_s:6.1f} / {duration_s:.0f} s{behind}",
              f"{'agent':10} {'x m':>7} {'y m':>7} {'error m':>8}  corrections"]
     for agent in session.agents:
         pose = view.poses.get(agent.id)
@@ -170,9 +177,9 @@ def run_live(game: Path, out: Path, speed: float, lag_s: float, show: Callable[[
                 view.drain()
                 if time.monotonic() - last >= TABLE_EVERY_S:
                     last = time.monotonic()
-                    show(table(session, view, truth, game_start, duration_s))
+                    show(table(session, view, truth, game_start, duration_s, (time.time() - start_at) * speed))
             view.drain()
-            show(table(session, view, truth, game_start, duration_s))
+            show(table(session, view, truth, game_start, duration_s, duration_s))
             view.close()
         failed = [agent.id for agent, edge in zip(session.agents, edges) if edge.returncode != 0]
         if failed:
