@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 
@@ -11,6 +10,7 @@ import pytest
 
 from protocol.session_log import read_session
 from reckon.bus import zenoh_config
+from reckon.demo import free_endpoint
 from reckon.edge_app import mcap_source, open_sources, run_edge
 from reckon.evaluation.inputs import build_inputs
 from reckon.evaluation.reckon_run import merged_samples
@@ -21,11 +21,6 @@ from sim_devices.wheelchair import simulate
 
 WAIT_S = 60.0
 
-
-def free_endpoint() -> str:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{probe.getsockname()[1]}"
 
 
 @pytest.fixture(scope="module")

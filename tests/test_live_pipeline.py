@@ -7,7 +7,6 @@ hub's `ready` event, liveliness tokens), never on sleeps.
 
 from __future__ import annotations
 
-import socket
 import threading
 from collections import defaultdict
 
@@ -19,6 +18,7 @@ from protocol import messages
 from protocol import bus as wire
 from protocol.session_log import read_session
 from reckon.bus import open_session, wait_for_peers, zenoh_config
+from reckon.demo import free_endpoint
 from reckon.edge_app import mcap_source, run_edge
 from reckon.evaluation.reckon_run import log_inputs, run_lockstep
 from reckon.hub_app import run_hub
@@ -26,11 +26,6 @@ from sim_devices.wheelchair import simulate
 
 WAIT_S = 120.0
 
-
-def free_endpoint() -> str:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{probe.getsockname()[1]}"
 
 
 @pytest.fixture(scope="module")
