@@ -24,7 +24,6 @@ All times here are venue time: device timestamps plus each device's clock offset
 from __future__ import annotations
 
 import itertools
-import math
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
@@ -268,13 +267,17 @@ class ChairHub:
         return min(latest) if latest else None
 
     def _close_groups(self) -> list[Any]:
-        watermark = self._watermark()
+        """Pair the impact groups every live agent's poses have passed (called with every pose)."""
+        if not self.impacts:
+            return []
         window_ns = int(self.settings.pairing_window_s * 1e9)
-        out: list[Any] = []
-        if watermark is None or not self.impacts:
-            return out
+        hold_ns = window_ns + self.settings.lateness_s * 1e9
+        watermark = self._watermark()
+        if watermark is None or min(self.impacts)[0] + hold_ns > watermark:
+            return []  # the usual case: nothing to close yet
         ordered = sorted(self.impacts)
-        while ordered and ordered[0][0] + window_ns + self.settings.lateness_s * 1e9 <= watermark:
+        out: list[Any] = []
+        while ordered and ordered[0][0] + hold_ns <= watermark:
             first_ns = ordered[0][0]
             group = [item for item in ordered if item[0] - first_ns <= window_ns]
             ordered = ordered[len(group):]

@@ -26,7 +26,7 @@ import zenoh
 
 from hub.chair_hub import ChairHub, HubSettings
 from protocol import bus as wire
-from protocol import keys, messages
+from protocol import keys
 from protocol.errors import InputError
 from protocol.session import Session
 from protocol.session_log import SessionWriter

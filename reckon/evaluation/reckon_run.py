@@ -105,7 +105,7 @@ def _interpolated(track: np.ndarray | None, frame_ns: np.ndarray) -> tuple[np.nd
 
 
 def merged_samples(agent: AgentInputs) -> list[ChairSample]:
-    """The agent's logged samples pushed through the live path's merger, in time order (tests)."""
+    """The agent's logged samples pushed through the live path's merger, in time order (tests, bench)."""
     merger = ChairMerger(agent.agent)
     streams = [(sensor_id, series) for sensor_id, series in agent.raw.items()]
     times = np.concatenate([series.time_ns for _, series in streams])
