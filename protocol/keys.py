@@ -37,6 +37,15 @@ def contact(venue: str, agent: str) -> str:
     return f"{ROOT}/{venue}/{agent}/truth/contact"
 
 
+def truth_length(venue: str, agent: str) -> str:
+    return f"{ROOT}/{venue}/{agent}/truth/length"
+
+
+def length(venue: str, agent: str) -> str:
+    """A swimmer's finished lengths (SwimLength), from the edge."""
+    return f"{ROOT}/{venue}/{agent}/length"
+
+
 def pose(venue: str, agent: str, track: str = "live") -> str:
     return f"{ROOT}/{venue}/{agent}/pose/{track}"
 

@@ -29,6 +29,7 @@ _SCALARS = {
     "int64": _F.TYPE_INT64,
     "uint32": _F.TYPE_UINT32,
     "string": _F.TYPE_STRING,
+    "bool": _F.TYPE_BOOL,
 }
 
 
@@ -144,6 +145,44 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("covariance", "double", True),  # 2 x 2 row-major (m^2)
         ("source_id", "string", False),
     ],
+    # A swimmer's length, published by the edge when the length ends (device clock). timestamp_ns
+    # is the wall touch that ended it, start_ns the push-off that began it. Distances are of the
+    # swimmer's track, wall to wall: swum (along the path) and lane-parallel (the pool length when
+    # the estimate is scaled to it). lateral_deviation_m is the track's offset to the left of the
+    # straight line between the length's ends, every profile_step_m along the lane from the start
+    # wall (snaking).
+    "SwimLength": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("sensor_id", "string", False),
+        ("method", "string", False),
+        ("index", "uint32", False),  # lengths of this sensor's stream, from 1
+        ("start_ns", "int64", False),
+        ("swum_distance_m", "double", False),
+        ("lane_distance_m", "double", False),
+        ("duration_s", "double", False),
+        ("stroke_count", "uint32", False),
+        ("stroke_rate_per_min", "double", False),
+        ("scale", "double", False),  # k: lane length over the integrated lane-parallel distance
+        ("heading_error_deg", "double", False),  # integrated heading at the wall minus the route's
+        ("lateral_deviation_m", "double", True),
+        ("profile_step_m", "double", False),
+        ("walls_detected", "bool", False),  # true: from the sensor; false: wall times were given
+    ],
+    # Simulator truth for one length of a swimmer (true time): push-off to wall touch.
+    "TruthLength": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),  # the wall touch
+        ("agent_id", "string", False),
+        ("index", "uint32", False),
+        ("start_ns", "int64", False),  # the push-off start (the feet begin to extend)
+        ("swum_distance_m", "double", False),
+        ("lane_distance_m", "double", False),
+        ("stroke_count", "uint32", False),
+        ("stroke", "string", False),  # crawl, breaststroke, backstroke, butterfly, kick
+        ("route", "string", False),  # straight, diagonal
+    ],
     "TruthContact": [
         ("schema_version", "uint32", False),
         ("timestamp_ns", "int64", False),
@@ -187,6 +226,8 @@ ImpactEvent = CLASSES["ImpactEvent"]
 Correction = CLASSES["Correction"]
 TruthContact = CLASSES["TruthContact"]
 PositionFix = CLASSES["PositionFix"]
+SwimLength = CLASSES["SwimLength"]
+TruthLength = CLASSES["TruthLength"]
 
 
 def new(name: str, **fields: Any) -> Any:

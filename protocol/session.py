@@ -35,10 +35,37 @@ class Mount(str, enum.Enum):
     LEFT_WHEEL = "left_wheel"
     RIGHT_WHEEL = "right_wheel"
     SEAT = "seat"
+    # A swimmer's sensor (the swimming paper's placements) and a kickboard pushed by hand.
+    WAIST = "waist"
+    BACK = "back"
+    HEAD = "head"
+    KICKBOARD = "kickboard"
+
+    @property
+    def on_wheel(self) -> bool:
+        return self in (Mount.LEFT_WHEEL, Mount.RIGHT_WHEEL)
 
 
 class AgentKind(str, enum.Enum):
     WHEELCHAIR = "wheelchair"
+    SWIMMER = "swimmer"
+
+
+class Route(str, enum.Enum):
+    """A swimmer's planned path over each length: along the lane, or the swimming paper's diagonal
+    (straight to half the pool length, then a right turn of DIAGONAL_TURN_DEG to the far wall)."""
+
+    STRAIGHT = "straight"
+    DIAGONAL = "diagonal"
+
+
+# The swimming paper's diagonal route: 12.5 m, turn right 35.75 deg, 15.40 m: 27.90 m in a 25 m pool.
+DIAGONAL_TURN_DEG = 35.75
+
+
+def route_end_heading_rad(route: "Route") -> float:
+    """Heading at the wall relative to the length's start heading (left positive, rad)."""
+    return -math.radians(DIAGONAL_TURN_DEG) if route is Route.DIAGONAL else 0.0
 
 
 @dataclass(frozen=True)
@@ -59,7 +86,7 @@ class Beacon:
 @dataclass(frozen=True)
 class Venue:
     name: str
-    court_length_m: float = 28.0  # FIBA / IWBF court
+    court_length_m: float = 28.0  # FIBA / IWBF court; for a pool, the lane length (wall to wall, along x)
     court_width_m: float = 15.0
     beacons: tuple[Beacon, ...] = ()
 
@@ -69,8 +96,9 @@ class Sensor:
     """One IMU of an agent.
 
     Chair frame: x forward, y left, z up. `spin_axis` (wheels) is the gyro axis, with sign, that
-    reads positive when the chair rolls forward. `forward_axis`/`left_axis` (seat) are the sensor
-    axes that point to the chair's front and left.
+    reads positive when the chair rolls forward. `forward_axis`/`left_axis` (seat and body mounts)
+    are the sensor axes that point to the chair's front and left, or for a swimmer lying prone,
+    towards the head (the direction of travel) and to the swimmer's left.
     """
 
     id: str
@@ -91,6 +119,7 @@ class Agent:
     start_x_m: float = 0.0  # start pose, used when the session has no truth
     start_y_m: float = 0.0
     start_heading_rad: float = 0.0
+    route: Route = Route.STRAIGHT  # swimmers: the planned path of every length
 
     def sensor(self, mount: Mount) -> Sensor | None:
         """The agent's sensor at `mount`, or None when it has none there."""
@@ -198,9 +227,9 @@ def _sensor(data: dict[str, Any], where: str) -> Sensor:
         forward_axis=_axis(data, "forward_axis", where),
         left_axis=_axis(data, "left_axis", where),
     )
-    if sensor.mount is not Mount.SEAT and sensor.spin_axis is None:
+    if sensor.mount.on_wheel and sensor.spin_axis is None:
         raise ConfigError(f"{where}: a {sensor.mount.value} sensor needs spin_axis (one of {', '.join(AXES)})")
-    if sensor.mount is Mount.SEAT:
+    if not sensor.mount.on_wheel:
         forward, left = sensor.forward_axis or "+x", sensor.left_axis or "+y"
         if forward[1] == left[1]:
             raise ConfigError(f"{where}: forward_axis {forward} and left_axis {left} must be different axes")
@@ -224,6 +253,7 @@ def _agent(data: dict[str, Any], where: str) -> Agent:
         start_x_m=_number(data, "start_x_m", where, 0.0, -1e3, 1e3),
         start_y_m=_number(data, "start_y_m", where, 0.0, -1e3, 1e3),
         start_heading_rad=_number(data, "start_heading_rad", where, 0.0, -10.0, 10.0),
+        route=_enum(data, "route", where, Route, "straight"),
     )
 
 

@@ -77,7 +77,7 @@ def test_recording_imports_three_sensors_at_their_mounts(imported: tuple[ImportR
     agent = data.session.agents[0]
     assert data.session.venue.name == "lab" and agent.wheel_diameter_m == DEFAULT_WHEEL_DIAMETER_M
     assert len(data.imu) == 3 and data.problems == []
-    assert {sensor.mount for sensor in agent.sensors} == set(Mount)
+    assert {sensor.mount for sensor in agent.sensors} == {Mount.LEFT_WHEEL, Mount.RIGHT_WHEEL, Mount.SEAT}
     assert all(sensor.rate_hz == 400.0 for sensor in agent.sensors)  # /rate/sensors in Settings.txt
     # both wheel sensors read +y when rolling forward (found from the data, mostly forward pushing)
     assert agent.sensor(Mount.LEFT_WHEEL).spin_axis == "+y"  # type: ignore[union-attr]

@@ -37,6 +37,12 @@ def test_every_message_round_trips_with_schema_version():
                              closing_speed_mps=1.5),
         "PositionFix": dict(timestamp_ns=8, agent_id="a", kind=messages.CorrectionKind.MANUAL, x_m=1.0, y_m=2.0,
                             covariance=[0.25, 0.0, 0.0, 0.25], source_id="operator"),
+        "SwimLength": dict(timestamp_ns=9, agent_id="a", sensor_id="s", method="reckon", index=2, start_ns=1,
+                           swum_distance_m=25.2, lane_distance_m=25.0, duration_s=20.5, stroke_count=18,
+                           stroke_rate_per_min=52.0, scale=0.98, heading_error_deg=-1.5,
+                           lateral_deviation_m=[0.0, 0.1, -0.05], profile_step_m=1.0, walls_detected=True),
+        "TruthLength": dict(timestamp_ns=10, agent_id="a", index=2, start_ns=1, swum_distance_m=25.1,
+                            lane_distance_m=25.0, stroke_count=18, stroke="crawl", route="diagonal"),
     }
     assert set(samples) == set(messages.TABLES)
     for name, fields in samples.items():
