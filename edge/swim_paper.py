@@ -65,7 +65,7 @@ def lateral_profile(lane_m: np.ndarray, cross_m: np.ndarray, step_m: float = PRO
 
     `lane_m`, `cross_m`: the track in the length's frame (along the start heading, and to its left).
     """
-    if len(lane_m) < 2:
+    if len(lane_m) < 2 or not (np.all(np.isfinite(lane_m)) and np.all(np.isfinite(cross_m))):
         return np.zeros(0)
     chord = np.array([lane_m[-1] - lane_m[0], cross_m[-1] - cross_m[0]])
     norm = float(np.hypot(*chord))

@@ -34,7 +34,7 @@ from hub.chair_corrections import CONTACT_DISTANCE_M, CONTACT_GATE_CHI2, CONTACT
 from hub.clocks import ClockOffsets
 from hub.smoother import FixedLagSmoother
 from protocol import keys, messages
-from protocol.session import Mount, Session
+from protocol.session import AgentKind, Mount, Session
 
 Kind = messages.CorrectionKind
 CORRECTIONS = ("beacon", "collision", "fix")
@@ -121,6 +121,8 @@ class ChairHub:
         ring = int(settings.lag_s * settings.pose_rate_hz) + 2
         self.agents: dict[str, AgentView] = {}
         for agent in session.agents:
+            if agent.kind is not AgentKind.WHEELCHAIR:
+                continue  # a swimmer's lengths need no venue-level correction (reckon/hub_app.py shows them)
             seat = agent.sensor(Mount.SEAT)
             self.agents[agent.id] = AgentView(agent.id, seat.id if seat else "", FixedLagSmoother(settings.lag_s, ring))
         self.impacts: deque[tuple[int, str]] = deque(maxlen=256)

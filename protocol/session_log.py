@@ -99,6 +99,7 @@ class SessionData:
     sightings: dict[str, Sightings]
     contacts: list[Contact]
     problems: list[str] = field(default_factory=list)
+    lengths: dict[str, list[Any]] = field(default_factory=dict)  # agent id -> TruthLength messages, in time order
 
     @property
     def start_ns(self) -> int:
@@ -204,6 +205,7 @@ def read_session(path: Path | str) -> SessionData:
     truth_rows: dict[str, list[tuple[int, float, float, float]]] = defaultdict(list)
     sighting_rows: dict[str, list[tuple[int, str, float]]] = defaultdict(list)
     contacts: list[Contact] = []
+    lengths: dict[str, list[Any]] = defaultdict(list)
     for _, _, msg in log_messages:
         kind = msg.DESCRIPTOR.name
         if kind == "ImuBatch":
@@ -215,6 +217,8 @@ def read_session(path: Path | str) -> SessionData:
         elif kind == "TruthContact":
             contacts.append(Contact(msg.timestamp_ns, msg.agent_id, msg.other_agent_id,
                                     messages.ContactKind(msg.kind), msg.closing_speed_mps))
+        elif kind == "TruthLength":
+            lengths[msg.agent_id].append(msg)
     session, skipped = log_messages.session, log_messages.skipped
     if session is None:
         raise InputError(f"{path}: not a reckon session (no '{METADATA_NAME}' metadata record"
@@ -236,7 +240,9 @@ def read_session(path: Path | str) -> SessionData:
     contacts.sort(key=lambda c: c.time_ns)
     for problem in problems:
         log.warning("%s", problem)
-    return SessionData(session, imu, truth, sightings, contacts, problems)
+    for rows in lengths.values():
+        rows.sort(key=lambda m: m.timestamp_ns)
+    return SessionData(session, imu, truth, sightings, contacts, problems, dict(lengths))
 
 
 def _imu_series(agent_id: str, sensor_id: str, rows: list[Any]) -> ImuSeries:

@@ -59,27 +59,54 @@ def run_sim(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     return 0
 
 
+def run_sim_swim(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from sim_devices.swim import params_with_overrides, simulate_swim
+
+    params = params_with_overrides(_overrides(args.set))
+    summary = simulate_swim(Path(args.output), seed=args.seed, swimmers=args.swimmers, lengths=args.lengths,
+                            params=params, progress=lambda fraction: progress(f"simulating: {100 * fraction:.0f} %"))
+    print(summary)
+    return 0
+
+
 def run_import(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     if args.format == "csv":
         from reckon.importers.csv_folder import import_csv_folder
 
         report = import_csv_folder(Path(args.folder), Path(args.output))
+    elif args.format == "tsnd":
+        from reckon.importers.tsnd_csv import DEFAULT_VENUE, import_tsnd_csv
+
+        venue = args.venue or DEFAULT_VENUE
+        toml = Path(venue) if venue.lower().endswith(".toml") else None  # a session description, else a name
+        report = import_tsnd_csv(Path(args.folder), Path(args.output), venue_toml=toml, venue=venue, agent_id=args.agent)
     else:
         from reckon.importers.ngimu import import_ngimu_folder
 
         mounts = dict(pair.split("=", 1) for pair in args.mount) if args.mount else None
         spin_axes = dict(pair.split("=", 1) for pair in args.spin_axis) if args.spin_axis else None
         report = import_ngimu_folder(Path(args.folder), Path(args.output), mounts=mounts, spin_axes=spin_axes,
-                                     wheel_diameter_m=args.wheel_diameter_m, agent_id=args.agent, venue=args.venue)
+                                     wheel_diameter_m=args.wheel_diameter_m, agent_id=args.agent or "chair",
+                                     venue=args.venue or "lab")
     print(report)
     return 0
 
 
 def run_eval(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
-    from reckon.evaluation.evaluate import evaluate
+    from protocol.session_log import read_session
+    from reckon.evaluation.evaluate import evaluate_data
     from reckon.evaluation.report import to_json, to_table
+    from reckon.evaluation.swim_eval import evaluate_swim, is_swim_session
 
-    report = evaluate(Path(args.session), progress)
+    path = Path(args.session)
+    data = read_session(path)
+    if is_swim_session(data):
+        from reckon.evaluation import swim_eval
+
+        swim = evaluate_swim(data, path, progress)
+        print(json.dumps(swim_eval.to_json(swim), indent=1) if args.json else swim_eval.to_table(swim))
+        return 0
+    report = evaluate_data(data, path, progress)
     if args.json:
         print(json.dumps(to_json(report), indent=1))
     else:
@@ -246,15 +273,26 @@ def build_parser() -> argparse.ArgumentParser:
     chairs.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a simulator parameter (docs/simulator.md)")
     chairs.set_defaults(run=run_sim)
+    swim = sim_kind.add_parser("swim", help="swimmers and kickboards in a 25 x 18 m pool, straight and diagonal "
+                                            "lengths (docs/simulator-swim.md)")
+    swim.add_argument("--seed", type=int, default=1)
+    swim.add_argument("--swimmers", type=int, default=4, help="crawl swimmers and kickboards per route (the paper: 4)")
+    swim.add_argument("--lengths", type=int, default=4, help="lengths per set")
+    swim.add_argument("-o", "--output", required=True)
+    swim.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                      help="override a simulator figure (docs/simulator-swim.md)")
+    swim.set_defaults(run=run_sim_swim)
 
     imp = sub.add_parser("import", help="convert recorded logs into a session log")
-    imp.add_argument("format", choices=["csv", "ngimu"], help="csv: docs/csv-import.md; ngimu: x-io NGIMU folders")
-    imp.add_argument("folder")
+    imp.add_argument("format", choices=["csv", "ngimu", "tsnd"],
+                     help="csv: docs/csv-import.md; ngimu: x-io NGIMU folders; tsnd: an ATR TSND121/151 CSV log")
+    imp.add_argument("folder", metavar="PATH", help="the folder (csv, ngimu) or the CSV file (tsnd)")
     imp.add_argument("-o", "--output", required=True)
-    ngimu = imp.add_argument_group("ngimu options")
+    ngimu = imp.add_argument_group("ngimu and tsnd options")
     ngimu.add_argument("--wheel-diameter-m", type=float, default=0.62, help="wheel diameter (default 0.62 m)")
-    ngimu.add_argument("--agent", default="chair", help="agent id (default chair)")
-    ngimu.add_argument("--venue", default="lab", help="venue name (default lab)")
+    ngimu.add_argument("--agent", help="agent id (ngimu: default chair; tsnd: default the swimmer)")
+    ngimu.add_argument("--venue", help="venue name (ngimu: default lab; tsnd: default pool), or for tsnd a "
+                                       "session description VENUE.toml")
     ngimu.add_argument("--mount", action="append", default=[], type=_key_value, metavar="DEVICE=MOUNT",
                        help="device folder, serial or sensor id = seat|left_wheel|right_wheel (default: from names)")
     ngimu.add_argument("--spin-axis", action="append", default=[], type=_key_value, metavar="WHEEL=AXIS",

@@ -5,9 +5,10 @@ Source -> (raw messages published as they come: nothing received is lost) -> Cha
 `reckon/<venue>/<agent>/pose/edge`, an ImpactEvent at once on `.../event/impact`. The hub's
 Correction messages for this agent (`.../correction`) are taken between batches and applied to
 the filter. Sources: `mcap://FILE`, a session log replayed at `speed` x real time (the
-simulator's sessions, or a recording); one x-IMU3 serial device per sensor
-(`SENSOR=serial://PORT?baud=N`); or BLE through bleak (`SENSOR=ble://ADDRESS`, a Thingy:52-style
-IMU, and `RECEIVER=ble://scan` for the venue's iBeacon/Eddystone beacons), with `--venue VENUE.toml`. Each raw batch carries the venue
+simulator's sessions, or a recording); one serial device per sensor, an x-IMU3
+(`SENSOR=serial://PORT?baud=N`) or an ATR-Promotions TSND121/151, which the edge sets up, starts
+and stops (`SENSOR=serial://PORT?protocol=tsnd&rate_hz=1000`, docs/tsnd.md); or BLE through
+bleak (`SENSOR=ble://ADDRESS`, a Thingy:52-style IMU, and `RECEIVER=ble://scan` for the venue's iBeacon/Eddystone beacons), with `--venue VENUE.toml`. Each raw batch carries the venue
 clock at its arrival (`received_ns`: the log time in a replay), from which the hub estimates
 the device's clock offset.
 """
@@ -28,10 +29,11 @@ from urllib.parse import urlparse
 import zenoh
 
 from edge.chair_edge import ChairEdge
+from edge.swim_edge import SwimEdge
 from protocol import bus as wire
 from protocol import keys, messages
 from protocol.errors import ConfigError
-from protocol.session import Session, load_toml
+from protocol.session import AgentKind, Session, load_toml
 from protocol.session_log import LogMessages, read_description
 from reckon.bus import Alive, Publisher, Subscription, flush, open_session, wait_for_peers
 
@@ -50,8 +52,12 @@ class EdgeSummary:
     extrapolated: int = 0
     wheel_overrun: int = 0
     final_pose: tuple[float, float, float] | None = None
+    swimmer: bool = False
+    lengths: int = 0  # swimmers: SwimLength messages out
 
     def __str__(self) -> str:
+        if self.swimmer:
+            return f"edge {self.agent_id}: {self.messages_in} messages in, {self.samples} samples, {self.lengths} lengths out"
         pose = "none" if self.final_pose is None else "x %.2f m, y %.2f m, heading %.1f deg" % (
             self.final_pose[0], self.final_pose[1], math.degrees(self.final_pose[2]))
         return (f"edge {self.agent_id}: {self.messages_in} messages in, {self.samples} samples, "
@@ -94,10 +100,12 @@ def mcap_source(path: Path, agent_ids: str | set[str] | None, speed: float, stop
 def run_edge(config: zenoh.Config, session: Session, agent_id: str, source: Iterable[Any], stop: threading.Event,
              pose_rate_hz: float = 50.0, wait_for: int = 0, wait_timeout_s: float = 60.0,
              progress: Callable[[EdgeSummary], None] | None = None) -> EdgeSummary:
-    """Run one chair's edge until the source ends or `stop` is set."""
-    edge = ChairEdge(session.agent(agent_id), pose_rate_hz)
+    """Run one agent's edge (a chair or a swimmer) until the source ends or `stop` is set."""
+    agent = session.agent(agent_id)
+    edge: ChairEdge | SwimEdge = (SwimEdge(agent, session.venue.court_length_m) if agent.kind is AgentKind.SWIMMER
+                                  else ChairEdge(agent, pose_rate_hz))
     venue = session.venue.name
-    summary = EdgeSummary(agent_id)
+    summary = EdgeSummary(agent_id, swimmer=isinstance(edge, SwimEdge))
     with open_session(config) as bus, Publisher(bus) as publisher, \
             Subscription(bus, keys.correction(venue, agent_id), capacity=256) as corrections, \
             Alive(bus, venue, wire.Role.EDGE, agent_id):
@@ -107,14 +115,21 @@ def run_edge(config: zenoh.Config, session: Session, agent_id: str, source: Iter
 
         def publish(outputs: list[Any]) -> None:
             for out in outputs:
-                if messages.type_name(out) == "ImpactEvent":
+                name = messages.type_name(out)
+                if name == "ImpactEvent":
                     publisher.publish(keys.impact(venue, agent_id), out)
+                elif name == "SwimLength":
+                    publisher.publish(keys.length(venue, agent_id), out)
+                    summary.lengths += 1
+                    log.info("%s length %d: %.2f m swum in %.1f s, %d strokes", out.sensor_id, out.index,
+                             out.swum_distance_m, out.duration_s, out.stroke_count)
                 else:
                     publisher.publish(keys.pose(venue, agent_id, "edge"), out)
 
         for message in source:
             summary.messages_in += 1
-            _take_corrections(corrections, edge)
+            if isinstance(edge, ChairEdge):
+                _take_corrections(corrections, edge)
             if message.DESCRIPTOR.name == "ImuBatch":
                 publisher.publish(keys.imu(venue, agent_id, message.sensor_id), message)  # raw first: nothing lost
                 publish(edge.push(message))
@@ -145,8 +160,11 @@ def _take_corrections(subscription: Subscription, edge: ChairEdge) -> None:
             edge.correct(message)
 
 
-def _summarise(summary: EdgeSummary, edge: ChairEdge) -> EdgeSummary:
-    summary.samples, summary.poses, summary.impacts = edge.samples, edge.poses, edge.impacts
+def _summarise(summary: EdgeSummary, edge: ChairEdge | SwimEdge) -> EdgeSummary:
+    summary.samples = edge.samples
+    if isinstance(edge, SwimEdge):
+        return summary
+    summary.poses, summary.impacts = edge.poses, edge.impacts
     summary.corrections = edge.corrections_applied
     summary.extrapolated = edge.merger.counters.extrapolated
     summary.wheel_overrun = edge.merger.counters.wheel_overrun
@@ -157,8 +175,10 @@ def _summarise(summary: EdgeSummary, edge: ChairEdge) -> EdgeSummary:
 
 
 class SerialSources:
-    """One reader thread per `SENSOR=serial://PORT?baud=N` source, all feeding one blocking queue.
+    """One reader thread per `SENSOR=serial://PORT?...` source, all feeding one blocking queue.
 
+    Each URL's `protocol` picks the decoder and the commands (SerialSource.from_url: an x-IMU3
+    streams on its own, a TSND is set up and started on open, stopped on close).
     Ports are opened here, at once, so a device that is missing fails before anything starts.
     A device that goes away (link lost, unplugged) keeps its last frames; its reader then tries
     to open the port again every `RETRY_S` and carries on when the device is back, for up to
@@ -170,14 +190,14 @@ class SerialSources:
     RETRY_S = 0.5
 
     def __init__(self, specs: list[tuple[str, str]], agent_id: str, stop: threading.Event, reconnect_s: float = 30.0):
-        from edge.decoders import ImuBatcher, Ximu3Decoder
+        from edge.decoders import ImuBatcher
         from edge.sources.serial_source import SerialSource
 
         self.stop = stop
         self.reconnect_s = reconnect_s
         self.reconnects = 0
         self.queue: queue.Queue[Any] = queue.Queue(maxsize=1000)  # blocks the readers, never drops
-        self.sources = [(url, SerialSource(url, Ximu3Decoder()).open(), ImuBatcher(agent_id, sensor_id))
+        self.sources = [(url, SerialSource.from_url(url).open(), ImuBatcher(agent_id, sensor_id))
                         for sensor_id, url in specs]
         self.threads = [threading.Thread(target=self._read, args=triple, daemon=True) for triple in self.sources]
         for thread in self.threads:
@@ -190,9 +210,9 @@ class SerialSources:
             self.queue.put(batch)
 
     def _read(self, url: str, source: Any, batcher: Any) -> None:
-        from edge.decoders import Ximu3Decoder
         from edge.sources.serial_source import DeviceDisconnected, DeviceUnavailable, SerialSource
 
+        decoder = source.decoder  # kept across reconnects: its counters and device clock carry on
         try:
             while not self.stop.is_set():
                 try:
@@ -206,7 +226,7 @@ class SerialSources:
                     deadline = time.monotonic() + self.reconnect_s
                     while source is None and time.monotonic() < deadline and not self.stop.wait(self.RETRY_S):
                         try:
-                            source = SerialSource(url, Ximu3Decoder()).open()
+                            source = SerialSource.from_url(url, decoder=decoder).open()
                         except DeviceUnavailable:
                             continue
                     if source is None:

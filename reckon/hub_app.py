@@ -3,7 +3,8 @@
 One subscription to the agents' input streams (a blocking queue: a slow hub slows the edges
 down, it never loses a measurement) feeds `hub.chair_hub.ChairHub` on one thread, in arrival order. Its
 outputs go out at once: live poses on `reckon/<venue>/<agent>/pose/live`, refined ones on
-`.../pose/refined`, corrections to the edges on `.../correction`. With `output`, every input and
+`.../pose/refined`, corrections to the edges on `.../correction`. A swimmer's lengths
+(`.../length`, from its edge) are recorded, logged as they come and totalled in the summary. With `output`, every input and
 every output is written to a session log (MCAP) as it passes, with the hub's clock as log time.
 
 The hub needs no edge to be up first and no edge needs the hub: an edge started earlier is picked
@@ -34,7 +35,7 @@ from reckon.bus import Alive, Publisher, Subscription, open_session
 
 log = logging.getLogger(__name__)
 POLL_S = 0.1
-INPUTS = ("imu/*", "beacon/*", "pose/edge", "event/impact", "fix")
+INPUTS = ("imu/*", "beacon/*", "pose/edge", "event/impact", "fix", "length")
 WARN_EVERY_S = 10.0
 
 
@@ -47,11 +48,38 @@ class HubSummary:
     pairs: int = 0
     skipped: int = 0
     full_waits: int = 0
+    swims: dict[str, SwimTotals] = field(default_factory=dict)  # sensor -> its lengths so far
 
     def __str__(self) -> str:
         total = sum(sum(kinds.values()) for kinds in self.corrections.values())
-        return (f"hub {self.venue}: {self.inputs} messages in, {self.outputs} out, {total} corrections "
+        text = (f"hub {self.venue}: {self.inputs} messages in, {self.outputs} out, {total} corrections "
                 f"({self.pairs} collision pairs), {self.skipped} samples skipped, queue full {self.full_waits} times")
+        for sensor_id, swim in sorted(self.swims.items()):
+            text += f"\n  {sensor_id}: {swim}"
+        return text
+
+
+@dataclass
+class SwimTotals:
+    """A swimmer's sensor as the hub shows it: lengths, total swum distance, the latest length."""
+
+    lengths: int = 0
+    swum_m: float = 0.0
+    seconds: float = 0.0
+    latest: str = ""
+
+    def add(self, length: Any) -> str:
+        self.lengths += 1
+        self.swum_m += length.swum_distance_m
+        self.seconds += length.duration_s
+        deviation = max((abs(v) for v in length.lateral_deviation_m), default=0.0)
+        self.latest = (f"length {length.index}: {length.swum_distance_m:.2f} m swum ({length.lane_distance_m:.2f} m "
+                       f"along the lane) in {length.duration_s:.1f} s, {length.stroke_count} strokes "
+                       f"({length.stroke_rate_per_min:.0f}/min), snaking up to {deviation:.2f} m")
+        return self.latest
+
+    def __str__(self) -> str:
+        return f"{self.lengths} lengths, {self.swum_m:.1f} m in {self.seconds:.0f} s; last {self.latest or 'none'}"
 
 
 def run_hub(config: zenoh.Config, session: Session, stop: threading.Event, settings: HubSettings = HubSettings(),
@@ -102,6 +130,12 @@ def run_hub(config: zenoh.Config, session: Session, stop: threading.Event, setti
                 if writer:
                     writer.write(item.key, message, item.received_ns)
                 summary.inputs += 1
+                if message.DESCRIPTOR.name == "SwimLength":
+                    line = summary.swims.setdefault(message.sensor_id, SwimTotals()).add(message)
+                    log.info("%s %s", message.sensor_id, line)
+                    if on_output:
+                        on_output(message)
+                    continue
                 emit(hub.on_message(message, item.received_ns))
             except (InputError, ValueError) as error:
                 summary.skipped += 1

@@ -1,12 +1,20 @@
 """Serial-port adapter: `serial://PORT?baud=115200` -> decoded frames.
 
-    with SerialSource("serial:///dev/ttyUSB0?baud=115200", Ximu3Decoder(), record_raw=log.write) as source:
+    with SerialSource.from_url("serial:///dev/rfcomm0?protocol=tsnd&rate_hz=1000", record_raw=log.write) as source:
         for frame in source.iter_frames(stop_event):
             ...
 
 URL: `serial://` + the port (`serial:///dev/ttyUSB0`, `serial://COM3`) + optional query keys
-`baud` (bits/s, default 115200; a USB x-IMU3 ignores it) and `read_timeout_s` (longest wait of
-one read, default 0.05 s: the stop event is checked that often). Other keys fail with ConfigError.
+`baud` (bits/s, default 115200; a USB x-IMU3 ignores it), `read_timeout_s` (longest wait of
+one read, default 0.05 s: the stop event is checked that often), `protocol` (`ximu3`, the
+default: an x-IMU3 that streams on its own; `tsnd`: an ATR-Promotions TSND121/151, which is
+commanded) and, for tsnd only, `rate_hz` (default 1000; 1000 / rate_hz must be a whole number
+of ms in 1..255: 1000, 500, 250, 200, 125, 100, ..., 4). Other keys or values fail with
+ConfigError naming the URL.
+
+`from_url` picks the decoder and the commands from `protocol`. A commanded device gets `setup`
+bytes written right after the port opens (tsnd: stop, settings, ranges, start; every reopen
+sends them again) and `teardown` bytes before it closes (tsnd: stop); `write` sends any other.
 
 Every byte read is handed to `record_raw` before it is decoded, so what the device sent is kept
 even when the decoder rejects it. Rejected frames are returned like the others (the caller may
@@ -31,6 +39,8 @@ from urllib.parse import parse_qs, urlsplit
 
 import serial
 
+from edge.decoders.tsnd import TsndDecoder, period_for_rate, setup_commands, teardown_commands
+from edge.decoders.ximu3 import Ximu3Decoder
 from protocol.errors import ConfigError, ReckonError
 
 log = logging.getLogger(__name__)
@@ -38,7 +48,10 @@ log = logging.getLogger(__name__)
 DEFAULT_BAUD = 115_200
 DEFAULT_READ_TIMEOUT_S = 0.05
 READ_SIZE = 4096  # bytes asked of one read; a read returns what has arrived, up to this
-URL_KEYS = ("baud", "read_timeout_s")
+WRITE_TIMEOUT_S = 1.0  # a device that takes no command within this is treated as gone
+URL_KEYS = ("baud", "read_timeout_s", "protocol", "rate_hz")
+PROTOCOLS = ("ximu3", "tsnd")
+DEFAULT_TSND_RATE_HZ = 1000.0  # the swimming paper's rate
 
 
 class DeviceError(ReckonError):
@@ -81,7 +94,24 @@ def parse_serial_url(url: str) -> tuple[str, int, float]:
             raise ConfigError(f"{url}: unknown key {key!r} (allowed: {', '.join(URL_KEYS)})")
     baud = _number(url, query, "baud", DEFAULT_BAUD, int, 50, 20_000_000)
     timeout_s = _number(url, query, "read_timeout_s", DEFAULT_READ_TIMEOUT_S, float, 0.001, 10.0)
+    parse_serial_protocol(url)
     return port, int(baud), float(timeout_s)
+
+
+def parse_serial_protocol(url: str) -> tuple[str, float | None]:
+    """(protocol, rate_hz) of a serial URL: ("ximu3", None) or ("tsnd", rate_hz). ConfigError for
+    another protocol, rate_hz without protocol=tsnd, or a rate the TSND cannot be set to."""
+    query = parse_qs(urlsplit(url).query, keep_blank_values=True)
+    protocol = query.get("protocol", ["ximu3"])[-1]
+    if protocol not in PROTOCOLS:
+        raise ConfigError(f"{url}: protocol={protocol!r} is not one of {', '.join(PROTOCOLS)}")
+    if protocol != "tsnd":
+        if "rate_hz" in query:
+            raise ConfigError(f"{url}: rate_hz is for protocol=tsnd (an x-IMU3's rate is set with its own software)")
+        return protocol, None
+    rate_hz = _number(url, query, "rate_hz", DEFAULT_TSND_RATE_HZ, float, 1.0, 1000.0)
+    period_for_rate(rate_hz, f"{url}: rate_hz")
+    return protocol, rate_hz
 
 
 def _number(url: str, query: dict[str, list[str]], key: str, default: float, kind: type, low: float,
@@ -102,11 +132,13 @@ class SerialSource:
     """Reads a serial port and decodes it. Context manager; not thread-safe (one reader)."""
 
     def __init__(self, url: str, decoder: Decoder, *, record_raw: Callable[[bytes], None] | None = None,
-                 warn_every_s: float = 5.0, clock: Callable[[], float] = time.monotonic):
+                 warn_every_s: float = 5.0, clock: Callable[[], float] = time.monotonic, setup: bytes = b"",
+                 teardown: bytes = b""):
         self.url = url
         self.port, self.baud, self.read_timeout_s = parse_serial_url(url)
         self.decoder = decoder
         self.record_raw = record_raw
+        self.setup, self.teardown = bytes(setup), bytes(teardown)
         self.warn_every_s = warn_every_s
         self._clock = clock
         self._serial: serial.Serial | None = None
@@ -115,19 +147,54 @@ class SerialSource:
         self._unreported: Counter[str] = Counter()
         self._last_warning = clock()
 
+    @classmethod
+    def from_url(cls, url: str, *, decoder: Decoder | None = None, **options: Any) -> "SerialSource":
+        """A source with the decoder and setup/teardown commands of the URL's `protocol`.
+        `decoder`: reuse one (after a reconnect, so its counters and clock carry on)."""
+        protocol, rate_hz = parse_serial_protocol(url)
+        if protocol == "tsnd" and rate_hz is not None:
+            return cls(url, decoder or TsndDecoder(), setup=setup_commands(rate_hz), teardown=teardown_commands(),
+                       **options)
+        return cls(url, decoder or Ximu3Decoder(), **options)
+
     def open(self) -> "SerialSource":
+        """Open the port and send `setup`; DeviceUnavailable if either fails."""
         if self._serial is None:
             try:
-                self._serial = serial.serial_for_url(self.port, baudrate=self.baud, timeout=self.read_timeout_s)
+                self._serial = serial.serial_for_url(self.port, baudrate=self.baud, timeout=self.read_timeout_s,
+                                                     write_timeout=WRITE_TIMEOUT_S)
             except (serial.SerialException, OSError, ValueError) as error:
                 raise DeviceUnavailable(f"{self.url}: cannot open {self.port} ({error})") from None
+            if self.setup:
+                try:
+                    self.write(self.setup)
+                except DeviceError as error:
+                    self.close()
+                    raise DeviceUnavailable(f"{self.url}: opened, but the setup commands failed ({error})") from None
         return self
 
     def close(self) -> None:
+        """Send `teardown` (best effort: a device that is gone cannot be stopped) and close."""
         if self._serial is not None:
+            if self.teardown:
+                try:
+                    self.write(self.teardown)
+                except DeviceError as error:
+                    log.warning("%s: teardown commands not sent (%s)", self.url, error)
             self._serial.close()
             self._serial = None
         self._report(force=True)
+
+    def write(self, data: bytes) -> None:
+        """Send bytes to the device and wait until they have left; DeviceDisconnected if the port
+        fails or the device takes nothing within WRITE_TIMEOUT_S."""
+        if self._serial is None:
+            raise DeviceError(f"{self.url}: write on a closed source")
+        try:
+            self._serial.write(data)
+            self._serial.flush()
+        except (serial.SerialException, OSError) as error:
+            raise DeviceDisconnected(f"{self.url}: cannot write {len(data)} bytes ({error})") from None
 
     def __enter__(self) -> "SerialSource":
         return self.open()

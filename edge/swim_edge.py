@@ -1,0 +1,187 @@
+"""A swimmer's edge computation, without I/O: ImuBatch messages in, SwimLength messages out.
+
+Per sensor: samples -> attitude and 100 Hz rows (edge/swim_bins.py) -> a buffer that holds the
+current length -> wall events (edge/swim_walls.py) -> when a length has ended (its wall touch,
+and the next push-off or rest that pins its velocity to zero), our estimate of it
+(edge/swim_length.py) leaves as a SwimLength. Memory is bounded by the longest length
+(`max_length_s`): a buffer that fills without a wall is dropped (counted) and the tracker waits
+for the next push-off. The velocity drift each length measures is carried into the next as its
+starting guess (`drift`), for the turn's and the live speed's benefit.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from edge import swim_walls as walls
+from edge.swim_bins import BIN_HZ, COLUMNS, T, BinSettings, BodyBinner
+from edge.swim_length import reckon_length
+from edge.swim_paper import LengthEstimate
+from protocol import messages
+from protocol.session import Agent, Route, Sensor
+
+log = logging.getLogger(__name__)
+MAX_LENGTH_S = 300.0  # a 25 m length takes 15-60 s; a 50 m one up to 2 min
+PRE_PUSH_S = 2.0  # rows kept before a push-off (its onset search looks back)
+TURN_WAIT_S = 6.0  # after a heading reversal, the push-off comes within this, or the set has ended
+
+
+@dataclass
+class TrackerCounters:
+    lengths: int = 0
+    turns: int = 0
+    stops: int = 0
+    overlong: int = 0  # buffers dropped: no wall within max_length_s
+    failed: int = 0  # lengths whose estimate could not be formed (too short, no displacement)
+
+
+class SwimTracker:
+    """One sensor: `push(time_ns, accel_g, gyro_dps) -> [LengthEstimate]`, `flush()`."""
+
+    def __init__(self, sensor: Sensor, pool_length_m: float, route: Route, max_length_s: float = MAX_LENGTH_S):
+        self.binner = BodyBinner(BinSettings(sensor.rate_hz, sensor.forward_axis or "+x", sensor.left_axis or "+y"))
+        self.pool_length_m, self.route = pool_length_m, route
+        self.capacity = walls.rows_for(max_length_s + PRE_PUSH_S + TURN_WAIT_S + 5.0)
+        self.rows = np.zeros((self.capacity, len(COLUMNS)))
+        self.n = 0
+        self.scanned = 0  # rows already examined for events
+        self.push: int | None = None  # row of the current length's push-off onset
+        self.reversal: int | None = None  # row of a heading reversal waiting for its push-off
+        self.drift = np.zeros(2)
+        self.counters = TrackerCounters()
+
+    def push_samples(self, time_ns: np.ndarray, accel_g: np.ndarray, gyro_dps: np.ndarray) -> list[LengthEstimate]:
+        return self._take(self.binner.push(time_ns, accel_g, gyro_dps))
+
+    def flush(self) -> list[LengthEstimate]:
+        """End of stream: a length in progress ends at its last rows if the swimmer had stopped."""
+        out: list[LengthEstimate] = []
+        if self.push is not None and self.reversal is not None:
+            out += self._close(walls.touch_before_turn(self.rows, self.reversal, self.push), self.n - 1)
+        return out
+
+    def _take(self, new_rows: np.ndarray) -> list[LengthEstimate]:
+        out: list[LengthEstimate] = []
+        for row in new_rows:
+            if self.n == self.capacity:
+                self._drop_overlong()
+            self.rows[self.n] = row
+            self.n += 1
+        while self.scanned < self.n:
+            out += self._examine(self.scanned)
+            self.scanned += 1
+        return out
+
+    def _examine(self, i: int) -> list[LengthEstimate]:
+        rows = self.rows
+        if self.push is None:
+            found = walls.find_push(rows[:i + 1], max(0, i - walls.rows_for(1.0)), i)
+            if found is not None:
+                self._start(found[0])
+            return []
+        if self.reversal is None:
+            glide = self.push + walls.rows_for(2.0)
+            if walls.reversed_at(rows, i, glide):
+                self.reversal = i
+            elif i > glide and walls.still_until(rows, i):
+                self.counters.stops += 1
+                return self._close(walls.touch_before_rest(rows, i - walls.rows_for(walls.STILL_S), self.push), i)
+            return []
+        found = walls.find_push(rows[:i + 1], max(self.reversal, i - walls.rows_for(1.0)), i)
+        if found is not None:
+            self.counters.turns += 1
+            out = self._close(walls.touch_before_turn(rows, self.reversal, self.push), found[0])
+            self._start(found[0])
+            return out
+        if i - self.reversal > walls.rows_for(TURN_WAIT_S):
+            self.counters.stops += 1
+            return self._close(walls.touch_before_turn(rows, self.reversal, self.push), i)
+        return []
+
+    def _start(self, push_row: int) -> None:
+        """A length begins at `push_row`: keep only the rows from PRE_PUSH_S before it."""
+        keep_from = max(0, push_row - walls.rows_for(PRE_PUSH_S))
+        self._shift(keep_from)
+        self.push = push_row - keep_from
+        self.reversal = None
+
+    def _close(self, touch: int, stop: int) -> list[LengthEstimate]:
+        push = self.push
+        self.push, self.reversal = None, None
+        if push is None or not push < touch <= stop:
+            self.counters.failed += 1
+            return []
+        estimate, drift = reckon_length(self.rows[:self.n], push, touch, stop, self.pool_length_m, self.route)
+        if not np.isfinite(estimate.swum_distance_m):
+            self.counters.failed += 1
+            return []
+        self.drift = drift
+        self.counters.lengths += 1
+        return [estimate]
+
+    def _shift(self, first: int) -> None:
+        if first <= 0:
+            return
+        kept = self.n - first
+        self.rows[:kept] = self.rows[first:self.n]
+        self.n -= first
+        self.scanned = max(0, self.scanned - first)
+        if self.reversal is not None:
+            self.reversal -= first
+
+    def _drop_overlong(self) -> None:
+        self.counters.overlong += 1
+        log.warning("no wall for %.0f s: dropping the length in progress", self.capacity / BIN_HZ)
+        self.push, self.reversal = None, None
+        self._shift(self.n - walls.rows_for(PRE_PUSH_S))
+
+
+@dataclass
+class SwimEdge:
+    """A swimmer's sensors: `push(batch) -> [SwimLength]`, `flush() -> [SwimLength]`."""
+
+    agent: Agent
+    pool_length_m: float
+    method: str = "reckon"
+    trackers: dict[str, SwimTracker] = field(default_factory=dict)
+    indices: dict[str, int] = field(default_factory=dict)
+    samples: int = 0
+
+    def __post_init__(self) -> None:
+        for sensor in self.agent.sensors:
+            self.trackers[sensor.id] = SwimTracker(sensor, self.pool_length_m, self.agent.route)
+            self.indices[sensor.id] = 0
+
+    def push(self, batch: Any) -> list[Any]:
+        tracker = self.trackers.get(batch.sensor_id)
+        if tracker is None:
+            return []
+        times = batch.timestamp_ns + np.asarray(batch.sample_offset_ns, dtype=np.int64)
+        accel = np.asarray(batch.accel_g, dtype=float).reshape(-1, 3)
+        gyro = np.asarray(batch.gyro_dps, dtype=float).reshape(-1, 3)
+        self.samples += len(times)
+        return [self._message(batch.sensor_id, e) for e in tracker.push_samples(times, accel, gyro)]
+
+    def flush(self) -> list[Any]:
+        return [self._message(sensor_id, e) for sensor_id, tracker in self.trackers.items() for e in tracker.flush()]
+
+    def _message(self, sensor_id: str, estimate: LengthEstimate) -> Any:
+        self.indices[sensor_id] += 1
+        return length_message(self.agent.id, sensor_id, self.method, self.indices[sensor_id], estimate, True)
+
+
+def length_message(agent_id: str, sensor_id: str, method: str, index: int, estimate: LengthEstimate,
+                   walls_detected: bool) -> Any:
+    swimming_s = max(estimate.duration_s, 1e-9)
+    return messages.new(
+        "SwimLength", timestamp_ns=estimate.end_ns, agent_id=agent_id, sensor_id=sensor_id, method=method,
+        index=index, start_ns=estimate.start_ns, swum_distance_m=estimate.swum_distance_m,
+        lane_distance_m=estimate.lane_distance_m, duration_s=estimate.duration_s,
+        stroke_count=estimate.stroke_count, stroke_rate_per_min=60.0 * estimate.stroke_count / swimming_s,
+        scale=estimate.scale, heading_error_deg=estimate.heading_error_deg,
+        lateral_deviation_m=np.round(estimate.lateral_m, 3).tolist(), profile_step_m=estimate.profile_step_m,
+        walls_detected=walls_detected)

@@ -1,0 +1,150 @@
+"""From segment motion to what a TSND121 on that segment reports: exact signals, then sensor errors.
+
+Kinematics. The sensor point is the body centre plus a lever arm carried by the segment:
+waist p + R_pelvis r, back p + R_trunk r, head p + R_trunk (NECK, 0, 0) + R_head (r - (NECK, 0, 0))
+(the head turns about the neck, not the body centre), kickboard p + Rz(board yaw) (reach r_x, 0, r_z)
+with the reach shortened to `CLOSE_REACH_M` in turns and rests (the board is held close at the
+wall). The sensor frame is the segment's turned by the mounting: R_sensor = R_segment Ry(-tilt) M,
+tilt the swimmer's pitch of that mount, M a random misalignment. Specific force = second difference
+of the sensor position (sampled at the IMU rate; every curve is smooth, so this is the kinematic
+acceleration to well under the noise) plus g up, resolved in the sensor frame, in g; angular rate
+= vee(R_k^T (R_k+1 - R_k-1) / 2 dt) in the sensor frame, in deg/s.
+
+Errors (per sensor, drawn once per set): per-axis scale and cross-axis sensitivity (one 3 x 3
+matrix), turn-on biases, bias random walks, white noise (density x sqrt(rate / 2)); then the ADC
+clips at the range and rounds to its 16-bit step, and the output is rounded to the TSND121's units
+(0.1 mg, 0.01 deg/s). The order is the physics: mounted, sensed (scale, cross-axis, bias, noise),
+then digitised.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from protocol.session import Mount
+from sim_devices.swim.attitude import Angles, rotation
+from sim_devices.swim.params import MountParams, SensorParams, SwimParams
+from sim_devices.swim.timeline import Timeline
+
+STANDARD_GRAVITY = 9.80665  # m/s^2 per g
+NECK_FORWARD_M = 0.55  # body centre to the base of the skull along the trunk; assumption (adult 1.6-1.9 m)
+CLOSE_REACH_M = 0.35  # kickboard held close to the chest in turns and at rest; assumption
+SEGMENT = {Mount.WAIST: "pelvis", Mount.BACK: "trunk", Mount.HEAD: "head", Mount.KICKBOARD: "board"}
+
+
+def mount_group(mount: Mount) -> str:
+    """The SwimParams group (and Swimmer.tilt_deg key) of a mount."""
+    return mount.value
+
+
+def mount_params(params: SwimParams, mount: Mount) -> MountParams:
+    return getattr(params, mount_group(mount))
+
+
+def small_rotation(rng: np.random.Generator, sd_deg: float) -> np.ndarray:
+    """Rotation matrix of a random rotation vector with SD `sd_deg` per axis (Rodrigues)."""
+    vector = np.radians(rng.normal(0.0, sd_deg, 3)) if sd_deg > 0 else np.zeros(3)
+    angle = float(np.linalg.norm(vector))
+    if angle < 1e-12:
+        return np.eye(3)
+    k = vector / angle
+    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * cross @ cross
+
+
+@dataclass(frozen=True)
+class SensorMotion:
+    """A sensor's exact motion: position (n, 3) m, sensor-to-world rotation (n, 3, 3), true signals."""
+
+    position_m: np.ndarray
+    rotation: np.ndarray
+    accel_g: np.ndarray
+    gyro_dps: np.ndarray
+
+
+def sensor_motion(timeline: Timeline, angles: dict[str, Angles], mount: Mount, tilt_deg: float,
+                  mounting: np.ndarray, params: SwimParams) -> SensorMotion:
+    """Exact position, attitude, specific force (g) and angular rate (deg/s) of the sensor at `mount`."""
+    lever = mount_params(params, mount)
+    centre = np.stack([timeline.x_m, timeline.y_m, timeline.z_m], axis=1)
+    segment = angles[SEGMENT[mount]].matrices()
+    if mount is Mount.HEAD:
+        trunk = angles["trunk"].matrices()
+        position = (centre + trunk[:, :, 0] * NECK_FORWARD_M
+                    + segment[:, :, 0] * (lever.lever_forward_m - NECK_FORWARD_M) + segment[:, :, 2] * lever.lever_up_m)
+    elif mount is Mount.KICKBOARD:
+        heading = rotation(angles["board"].yaw, np.zeros(len(centre)), np.zeros(len(centre)))
+        reach = CLOSE_REACH_M + (lever.lever_forward_m - CLOSE_REACH_M) * timeline.reach
+        position = centre + heading[:, :, 0] * reach[:, None] + heading[:, :, 2] * lever.lever_up_m
+    else:
+        position = centre + segment[:, :, 0] * lever.lever_forward_m + segment[:, :, 2] * lever.lever_up_m
+    tilt = rotation(np.zeros(1), np.array([math.radians(tilt_deg)]), np.zeros(1))[0]
+    sensor = segment @ (tilt @ mounting)
+    rate = params.sensors.rate_hz
+    accel = _second_difference(position) * rate * rate
+    accel[:, 2] += STANDARD_GRAVITY
+    specific = np.einsum("nji,nj->ni", sensor, accel) / STANDARD_GRAVITY
+    return SensorMotion(position, sensor, specific, np.degrees(angular_rate(sensor, rate)))
+
+
+def _second_difference(values: np.ndarray) -> np.ndarray:
+    out = np.empty_like(values)
+    out[1:-1] = values[2:] - 2.0 * values[1:-1] + values[:-2]
+    out[0], out[-1] = out[1], out[-2]
+    return out
+
+
+def angular_rate(rotations: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Body-frame angular velocity (rad/s) of (n, 3, 3) body-to-world rotations sampled at `rate_hz`."""
+    change = np.empty_like(rotations)
+    change[1:-1] = rotations[2:] - rotations[:-2]
+    change[0], change[-1] = 2.0 * (rotations[1] - rotations[0]), 2.0 * (rotations[-1] - rotations[-2])
+    w = np.einsum("nji,njk->nik", rotations, change) * (rate_hz / 2.0)
+    return np.stack([w[:, 2, 1] - w[:, 1, 2], w[:, 0, 2] - w[:, 2, 0], w[:, 1, 0] - w[:, 0, 1]], axis=1) / 2.0
+
+
+@dataclass(frozen=True)
+class ImuErrors:
+    """The errors of one sensor, drawn once per set."""
+
+    accel_matrix: np.ndarray  # (3, 3) scale on the diagonal, cross-axis off it
+    accel_bias_g: np.ndarray
+    gyro_matrix: np.ndarray
+    gyro_bias_dps: np.ndarray
+
+    @classmethod
+    def draw(cls, sensors: SensorParams, rng: np.random.Generator) -> "ImuErrors":
+        def matrix(scale_sd: float) -> np.ndarray:
+            cross = rng.normal(0.0, sensors.cross_axis, (3, 3))
+            np.fill_diagonal(cross, 0.0)
+            return np.diag(1.0 + rng.normal(0.0, scale_sd, 3)) + cross
+
+        accel_matrix = matrix(sensors.accel_scale_error)
+        accel_bias = rng.normal(0.0, sensors.accel_bias_g, 3)
+        gyro_matrix = matrix(sensors.gyro_scale_error)
+        return cls(accel_matrix, accel_bias, gyro_matrix, rng.normal(0.0, sensors.gyro_bias_dps, 3))
+
+
+def measure(accel_g: np.ndarray, gyro_dps: np.ndarray, errors: ImuErrors, sensors: SensorParams,
+            rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Reported (accel g, gyro deg/s), (n, 3) each, from exact sensor-frame signals (draw order fixed)."""
+    n, rate = len(accel_g), sensors.rate_hz
+    band = math.sqrt(rate / 2.0)  # white noise over the Nyquist band
+    accel = accel_g @ errors.accel_matrix.T + errors.accel_bias_g
+    accel += np.cumsum(rng.normal(0.0, sensors.accel_bias_walk_g_per_sqrt_s / math.sqrt(rate), (n, 3)), axis=0)
+    accel += rng.normal(0.0, sensors.accel_noise_g_per_sqrt_hz * band, (n, 3))
+    gyro = gyro_dps @ errors.gyro_matrix.T + errors.gyro_bias_dps
+    gyro += np.cumsum(rng.normal(0.0, sensors.gyro_bias_walk_dps_per_sqrt_s / math.sqrt(rate), (n, 3)), axis=0)
+    gyro += rng.normal(0.0, sensors.gyro_noise_dps_per_sqrt_hz * band, (n, 3))
+    return (digitise(accel, sensors.accel_range_g, sensors.adc_bits, sensors.accel_unit_g),
+            digitise(gyro, sensors.gyro_range_dps, sensors.adc_bits, sensors.gyro_unit_dps))
+
+
+def digitise(values: np.ndarray, full_scale: float, bits: int, unit: float) -> np.ndarray:
+    """Clip to +-full_scale, round to the ADC step, then to the output unit."""
+    step = full_scale / 2 ** (bits - 1)
+    adc = np.clip(np.round(values / step) * step, -full_scale, full_scale)
+    return np.round(adc / unit) * unit
