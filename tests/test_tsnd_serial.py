@@ -60,7 +60,7 @@ def test_source_commands_the_device_and_1000_hz_samples_arrive(faults):
         url = f"serial://{device.port}?protocol=tsnd&rate_hz=1000"
         with SerialSource.from_url(url, record_raw=recorded.append) as source:
             frames = read_until(source, stopped)  # the device stops by itself at the end of its samples
-            assert device.finished.is_set()
+            assert device.finished.is_set() and device.error is None
         counters = source.decoder.counters
     assert device.commands[:5] == SETUP_CODES and device.period_ms == 1
     assert counters.messages_by_code == {"0x8F": 4, "0x93": 1, "0x88": 1, "0x89": 1}  # 4 acks, started, stopped
@@ -130,12 +130,16 @@ def test_edge_serial_sources_pick_the_tsnd_decoder_and_stop_the_device_on_close(
     with TsndDevice(time_ns, accel, gyro, speed=1.0) as device:
         sources = SerialSources([("swimmer-waist", f"serial://{device.port}?protocol=tsnd&rate_hz=1000")],
                                 "swimmer", stop)
+        deadline = threading.Timer(DEADLINE_S, stop.set)  # bounded even if no batch ever came
+        deadline.start()
         count = 0
-        for batch in sources:
+        for batch in sources:  # ends once the reader has seen `stop` (it checks every read_timeout_s)
             assert batch.sensor_id == "swimmer-waist" and batch.received_ns > 0
             count += len(batch.sample_offset_ns)
             if count >= 200:
                 stop.set()
+        deadline.cancel()
+        assert count >= 200 and device.error is None
         assert isinstance(sources.sources[0][1].decoder, TsndDecoder)
         assert device.idle.wait(DEADLINE_S)  # the source's teardown stopped the measurement
         assert device.commands[:5] == SETUP_CODES and device.commands[-1] == 0x15
