@@ -5,8 +5,7 @@ current length -> wall events (edge/swim_walls.py) -> when a length has ended (i
 and the next push-off or rest that pins its velocity to zero), our estimate of it
 (edge/swim_length.py) leaves as a SwimLength. Memory is bounded by the longest length
 (`max_length_s`): a buffer that fills without a wall is dropped (counted) and the tracker waits
-for the next push-off. The velocity drift each length measures is carried into the next as its
-starting guess (`drift`), for the turn's and the live speed's benefit.
+for the next push-off.
 """
 
 from __future__ import annotations
@@ -18,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from edge import swim_walls as walls
-from edge.swim_bins import BIN_HZ, COLUMNS, T, BinSettings, BodyBinner
+from edge.swim_bins import BIN_HZ, COLUMNS, BinSettings, BodyBinner
 from edge.swim_length import reckon_length
 from edge.swim_paper import LengthEstimate
 from protocol import messages
@@ -51,11 +50,10 @@ class SwimTracker:
         self.scanned = 0  # rows already examined for events
         self.push: int | None = None  # row of the current length's push-off onset
         self.reversal: int | None = None  # row of a heading reversal waiting for its push-off
-        self.drift = np.zeros(2)
         self.counters = TrackerCounters()
 
     def push_samples(self, time_ns: np.ndarray, accel_g: np.ndarray, gyro_dps: np.ndarray) -> list[LengthEstimate]:
-        return self._take(self.binner.push(time_ns, accel_g, gyro_dps))
+        return self.push_rows(self.binner.push(time_ns, accel_g, gyro_dps))
 
     def flush(self) -> list[LengthEstimate]:
         """End of stream: a length in progress ends at its last rows if the swimmer had stopped."""
@@ -64,7 +62,8 @@ class SwimTracker:
             out += self._close(walls.touch_before_turn(self.rows, self.reversal, self.push), self.n - 1)
         return out
 
-    def _take(self, new_rows: np.ndarray) -> list[LengthEstimate]:
+    def push_rows(self, new_rows: np.ndarray) -> list[LengthEstimate]:
+        """Rows of edge/swim_bins.py already made (`reckon eval` bins a whole sensor once)."""
         out: list[LengthEstimate] = []
         for row in new_rows:
             if self.n == self.capacity:
@@ -115,11 +114,10 @@ class SwimTracker:
         if push is None or not push < touch <= stop:
             self.counters.failed += 1
             return []
-        estimate, drift = reckon_length(self.rows[:self.n], push, touch, stop, self.pool_length_m, self.route)
+        estimate = reckon_length(self.rows[:self.n], push, touch, stop, self.pool_length_m, self.route)
         if not np.isfinite(estimate.swum_distance_m):
             self.counters.failed += 1
             return []
-        self.drift = drift
         self.counters.lengths += 1
         return [estimate]
 

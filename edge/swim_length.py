@@ -22,7 +22,7 @@ from scipy.signal import butter, find_peaks, sosfiltfilt
 
 from edge.swim_bins import DV_X, DV_Y, HEAD_X, HEAD_Y, SURGE, T
 from edge.swim_paper import LengthEstimate, lateral_profile
-from protocol.session import DIAGONAL_TURN_DEG, Route, route_end_heading_rad
+from protocol.session import Route, route_end_heading_rad
 
 HEADING_CUTOFF_HZ = 0.2  # below breathing (every 2-3 strokes: 0.4-0.8 Hz) and strokes; the diagonal's
 # turn (1.5-3 m, about 2 s) and snaking (periods over 10 s) pass
@@ -31,13 +31,6 @@ HEADING_CUTOFF_HZ = 0.2  # below breathing (every 2-3 strokes: 0.4-0.8 Hz) and s
 PRE_TURN_SHARE = (0.15, 0.4)
 GLIDE_S = 1.5  # after the push-off, before the first stroke: not counted for the stroke rate
 STROKE_BAND_HZ = (0.4, 3.0)
-
-
-def chord_angle_rad(route: Route) -> float:
-    """Planned angle of the push-off-to-touch chord from the lane, left positive."""
-    if route is Route.DIAGONAL:  # half a length along the lane, the rest turned: tan = tan(turn) / 2
-        return -math.atan(math.tan(math.radians(DIAGONAL_TURN_DEG)) / 2.0)
-    return 0.0
 
 
 def count_strokes(surge_g: np.ndarray, rate_hz: float) -> int:
@@ -59,8 +52,8 @@ def count_strokes(surge_g: np.ndarray, rate_hz: float) -> int:
 
 
 def reckon_length(rows: np.ndarray, push: int, touch: int, stop: int, pool_length_m: float, route: Route,
-                  rate_hz: float = 100.0) -> tuple[LengthEstimate, np.ndarray]:
-    """(estimate, velocity drift (m/s^2, earth x y)) for rows[push..touch], zero velocity at push and stop."""
+                  rate_hz: float = 100.0) -> LengthEstimate:
+    """Our estimate of rows[push..touch], with zero velocity at push and stop."""
     if not push < touch <= stop < len(rows):
         raise ValueError(f"rows push {push} < touch {touch} <= stop {stop} < {len(rows)} do not hold")
     span = rows[push:stop + 1]
@@ -96,7 +89,7 @@ def reckon_length(rows: np.ndarray, push: int, touch: int, stop: int, pool_lengt
     strokes = count_strokes(rows[push + int(GLIDE_S * rate_hz):touch + 1, SURGE], rate_hz)
     estimate = LengthEstimate(int(rows[push, T]), int(rows[touch, T]), swum, float(lane_m[-1]), scale,
                               turned - expected, lateral_profile(lane_m, cross_m), stroke_count=strokes)
-    return estimate, drift
+    return estimate
 
 
 def _lane_direction(track: np.ndarray, head: np.ndarray, step: np.ndarray, route: Route) -> np.ndarray:

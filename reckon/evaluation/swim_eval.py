@@ -129,7 +129,7 @@ def evaluate_swim(data: SessionData, path: Path, progress: Callable[[str], None]
                                                                                  series.gyro_dps)
             _true_walls(report, rows, truth, pool, agent.route, common)
             tracker = SwimTracker(sensor, pool, agent.route)
-            detected = tracker._take(rows) + tracker.flush()
+            detected = tracker.push_rows(rows) + tracker.flush()
             _score_detected(report, detected, truth, common)
     return report
 
@@ -141,7 +141,7 @@ def _true_walls(report: SwimReport, rows: np.ndarray, truth: list[Any], pool: fl
         push, touch = (int(i) for i in np.searchsorted(times, [length.start_ns, length.timestamp_ns]))
         following = truth[k].start_ns if k < len(truth) else length.timestamp_ns + 2_000_000_000
         stop = min(int(np.searchsorted(times, following)), len(rows) - 1)
-        estimate, _ = reckon_length(rows, push, min(touch, stop), stop, pool, route)
+        estimate = reckon_length(rows, push, min(touch, stop), stop, pool, route)
         report.lengths.append(LengthScore("reckon, true walls", index=k, truth_m=length.swum_distance_m,
                                           estimate_m=estimate.swum_distance_m, **common))
 

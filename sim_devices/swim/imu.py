@@ -44,17 +44,6 @@ def mount_params(params: SwimParams, mount: Mount) -> MountParams:
     return getattr(params, mount_group(mount))
 
 
-def small_rotation(rng: np.random.Generator, sd_deg: float) -> np.ndarray:
-    """Rotation matrix of a random rotation vector with SD `sd_deg` per axis (Rodrigues)."""
-    vector = np.radians(rng.normal(0.0, sd_deg, 3)) if sd_deg > 0 else np.zeros(3)
-    angle = float(np.linalg.norm(vector))
-    if angle < 1e-12:
-        return np.eye(3)
-    k = vector / angle
-    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * cross @ cross
-
-
 @dataclass(frozen=True)
 class SensorMotion:
     """A sensor's exact motion: position (n, 3) m, sensor-to-world rotation (n, 3, 3), true signals."""

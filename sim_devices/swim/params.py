@@ -12,18 +12,16 @@ the reasoning and a plausible range follow it. Figures drawn per swimmer are [mi
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
 from protocol.errors import ConfigError
+from sim_devices.param_table import param, rows, with_overrides, zeroed
 
 STROKES = ("crawl", "breaststroke", "backstroke", "butterfly", "kick")
 
 
-def _p(default: float | int, unit: str, low: float, high: float, source: str = "") -> Any:
-    """A parameter: default, unit, accepted range [low, high] and where the figure comes from."""
-    return field(default=default, metadata={"unit": unit, "low": low, "high": high, "source": source})
+_p = param
 
 
 @dataclass(frozen=True)
@@ -357,27 +355,18 @@ def error_free(params: SwimParams | None = None) -> SwimParams:
 
     Quantisation and range stay (they are the device's format).
     """
-    params = params or SwimParams()
-    groups = {name: dataclasses.replace(getattr(params, name),
-                                        **{f: type(getattr(getattr(params, name), f))(0) for f in fields})
-              for name, fields in _ERROR_FIELDS.items()}
-    return dataclasses.replace(params, **groups)
+    return zeroed(params or SwimParams(), _ERROR_FIELDS)
+
+
+def _source(group: str, item: dataclasses.Field[Any]) -> str:
+    if group in STROKE_SOURCES:
+        return "STROKE_SOURCES[{!r}]".format(group)
+    return MOUNT_SOURCES.get(group, item.metadata["source"])
 
 
 def describe(params: SwimParams | None = None) -> list[tuple[str, Any, str, str]]:
     """(dotted key, value, unit, source) of every figure, in declaration order."""
-    params = params or SwimParams()
-    rows = []
-    for group in dataclasses.fields(params):
-        value = getattr(params, group.name)
-        for item in dataclasses.fields(value):
-            source = item.metadata["source"]
-            if group.name in STROKE_SOURCES:
-                source = "STROKE_SOURCES[{!r}]".format(group.name)
-            elif group.name in MOUNT_SOURCES:
-                source = MOUNT_SOURCES[group.name]
-            rows.append((f"{group.name}.{item.name}", getattr(value, item.name), item.metadata["unit"], source))
-    return rows
+    return rows(params or SwimParams(), _source)
 
 
 def params_with_overrides(overrides: dict[str, str], base: SwimParams | None = None) -> SwimParams:
@@ -386,35 +375,9 @@ def params_with_overrides(overrides: dict[str, str], base: SwimParams | None = N
     ConfigError names the key when it is unknown, not a number of the right type, outside its
     range, or leaves a [min, max] pair reversed.
     """
-    params = base or SwimParams()
-    changes: dict[str, dict[str, Any]] = {}
-    groups = {f.name for f in dataclasses.fields(params)}
-    for key, text in overrides.items():
-        group_name, _, name = key.partition(".")
-        if group_name not in groups:
-            raise ConfigError(f"--set {key}: unknown group {group_name!r} (groups: {', '.join(sorted(groups))})")
-        known = {f.name: f for f in dataclasses.fields(getattr(params, group_name))}
-        if name not in known:
-            raise ConfigError(f"--set {key}: unknown key {name!r} in {group_name} (keys: {', '.join(sorted(known))})")
-        changes.setdefault(group_name, {})[name] = _parse(key, str(text), known[name])
-    result = dataclasses.replace(params, **{group: dataclasses.replace(getattr(params, group), **values)
-                                            for group, values in changes.items()})
+    result = with_overrides(base or SwimParams(), overrides)
     check(result)
     return result
-
-
-def _parse(key: str, text: str, spec: dataclasses.Field[Any]) -> float | int:
-    low, high = spec.metadata["low"], spec.metadata["high"]
-    integer = isinstance(spec.default, int) and not isinstance(spec.default, bool)
-    try:
-        value: float | int = int(text) if integer else float(text)
-    except ValueError:
-        raise ConfigError(f"--set {key}={text}: not {'an integer' if integer else 'a number'}") from None
-    if not math.isfinite(value):
-        raise ConfigError(f"--set {key}={text}: not a finite number")
-    if not low <= value <= high:
-        raise ConfigError(f"--set {key}={text}: outside [{low}, {high}] {spec.metadata['unit']}")
-    return value
 
 
 MAX_BATCH_SPAN_S = 4.0  # ImuBatch sample offsets are uint32 ns: at most 4.29 s

@@ -20,7 +20,6 @@ Determinism: agent and swimmer seeds are fixed children of `SeedSequence(seed)`;
 from __future__ import annotations
 
 import dataclasses
-import heapq
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,7 +31,7 @@ from protocol import keys, messages
 from protocol.errors import ConfigError
 from protocol.messages import imu_batch
 from protocol.session import AgentKind, Agent, Mount, Route, Sensor, Session, Venue
-from protocol.session_log import SessionWriter
+from sim_devices.common import Item, write_merged
 from sim_devices.swim.params import STROKES, SwimParams, check
 from sim_devices.swim.simulate import MAX_LENGTHS, SensorStream, SetTruth, simulate_set_detail
 from sim_devices.swim.timeline import default_start_y
@@ -44,7 +43,6 @@ OTHER_STROKE_SWIMMERS = 2  # breaststroke, backstroke, butterfly: swimmers each
 STRAIGHT_LANES = (3, 4, 2, 5, 1, 6)  # inner lanes (0-based of 8), filled centre first
 MAX_SWIMMERS = 20
 SIM_SHARE = 0.5  # share of the progress bar for simulating (the rest: writing)
-Item = tuple[int, int, str, Any]  # (log_time_ns, stream order, topic, message)
 
 
 @dataclass(frozen=True)
@@ -171,7 +169,7 @@ def simulate_swim(output: Path, seed: int = 1, swimmers: int = 4, lengths: int =
     sources += [_truth_items(plan.agent_id, truth) for plan, _, truth, _ in sets]
     samples = sum(len(s.time_ns) for _, streams, _, _ in sets for s in streams)
     total = samples / params.sensors.batch_samples + 1.0
-    _write(output, session, sources, lambda written: report(SIM_SHARE + (1.0 - SIM_SHARE) * min(written / total, 0.99)))
+    write_merged(output, session, sources, lambda written: report(SIM_SHARE + (1.0 - SIM_SHARE) * min(written / total, 0.99)))
     report(1.0)
     epoch_ns = params.link.start_unix_s * 1_000_000_000
     end_ns = max(int(truth.time_ns[-1]) for _, _, truth, _ in sets)
@@ -246,15 +244,3 @@ def _length_item(agent_id: str, truth: SetTruth, index: int, topic: str) -> Item
         "TruthLength", timestamp_ns=stamp, agent_id=agent_id, index=index + 1, start_ns=int(truth.push_ns[index]),
         swum_distance_m=float(truth.swum_m[index]), lane_distance_m=float(truth.lane_m[index]),
         stroke_count=int(truth.strokes[index]), stroke=truth.stroke, route=truth.route.value)
-
-
-def _write(output: Path, session: Session, sources: list[Iterator[Item]], progress: Callable[[int], None]) -> None:
-    try:
-        writer = SessionWriter(output, session)
-    except OSError as error:
-        raise ConfigError(f"{output}: cannot write ({error.strerror})") from None
-    with writer:
-        for count, (log_ns, _, topic, message) in enumerate(heapq.merge(*sources, key=lambda item: item[:2])):
-            writer.write(topic, message, log_ns)
-            if count % 5000 == 0:
-                progress(count)

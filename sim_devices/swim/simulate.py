@@ -19,9 +19,9 @@ import numpy as np
 
 from protocol.errors import ConfigError
 from protocol.session import Mount, Route
+from sim_devices.common import small_rotation
 from sim_devices.swim.attitude import segment_angles
-from sim_devices.swim.imu import ImuErrors, SensorMotion, measure, mount_group, mount_params, sensor_motion, \
-    small_rotation
+from sim_devices.swim.imu import ImuErrors, SensorMotion, measure, mount_group, mount_params, sensor_motion
 from sim_devices.swim.params import STROKES, SwimParams, check
 from sim_devices.swim.swimmer import Swimmer, draw_swimmer, swimmer_rngs
 from sim_devices.swim.timeline import Timeline, build_timeline

@@ -18,21 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim_devices.common import small_rotation
 from sim_devices.wheelchair.params import ClockParams, SensorParams
 
 MAG_LSB_UT = 0.15  # AK8963 16-bit output step (datasheet), also AK09916 in the ICM-20948
 JITTER_CLIP_SD = 3.0
-
-
-def small_rotation(rng: np.random.Generator, sd_deg: float) -> np.ndarray:
-    """Rotation matrix for a random rotation vector with SD `sd_deg` per axis (Rodrigues)."""
-    vector = np.radians(rng.normal(0.0, sd_deg, 3)) if sd_deg > 0 else np.zeros(3)
-    angle = float(np.linalg.norm(vector))
-    if angle < 1e-12:
-        return np.eye(3)
-    k = vector / angle
-    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * cross @ cross
 
 
 @dataclass(frozen=True)

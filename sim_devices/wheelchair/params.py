@@ -9,17 +9,14 @@ published source; its plausible range is given next to it.
 
 from __future__ import annotations
 
-import dataclasses
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
 from protocol.errors import ConfigError
+from sim_devices.param_table import param, rows, with_overrides, zeroed
 
 
-def _p(default: float | int | bool, unit: str, low: float, high: float, source: str) -> Any:
-    """A parameter field: default, unit, accepted range [low, high] and where the figure comes from."""
-    return field(default=default, metadata={"unit": unit, "low": low, "high": high, "source": source})
+_p = param
 
 
 @dataclass(frozen=True)
@@ -248,23 +245,12 @@ def error_free(params: SimParams | None = None) -> SimParams:
     The motion (including contact shoves, which move a chair without turning its wheels) and the
     contact impact pulses are kept: they are what happened, not measurement errors.
     """
-    params = params or SimParams()
-    groups = {name: dataclasses.replace(getattr(params, name),
-                                        **{f: type(getattr(getattr(params, name), f))(0) for f in fields})
-              for name, fields in _ERROR_FIELDS.items()}
-    return dataclasses.replace(params, **groups)
+    return zeroed(params or SimParams(), _ERROR_FIELDS)
 
 
 def describe(params: SimParams | None = None) -> list[tuple[str, Any, str, str]]:
     """(dotted key, value, unit, source) of every parameter, in declaration order."""
-    params = params or SimParams()
-    rows = []
-    for group in dataclasses.fields(params):
-        value = getattr(params, group.name)
-        for item in dataclasses.fields(value):
-            rows.append((f"{group.name}.{item.name}", getattr(value, item.name), item.metadata["unit"],
-                         item.metadata["source"]))
-    return rows
+    return rows(params or SimParams())
 
 
 def params_with_overrides(overrides: dict[str, str], base: SimParams | None = None) -> SimParams:
@@ -273,37 +259,9 @@ def params_with_overrides(overrides: dict[str, str], base: SimParams | None = No
     ConfigError names the key when it is unknown, the value is not a number of the right type, or
     it lies outside the parameter's range; also when a [min, max] pair ends up reversed.
     """
-    params = base or SimParams()
-    changes: dict[str, dict[str, Any]] = {}
-    groups = {f.name for f in dataclasses.fields(params)}
-    for key, text in overrides.items():
-        group_name, _, name = key.partition(".")
-        if group_name not in groups:
-            raise ConfigError(f"--set {key}: unknown group {group_name!r} (groups: {', '.join(sorted(groups))})")
-        group = getattr(params, group_name)
-        known = {f.name: f for f in dataclasses.fields(group)}
-        if name not in known:
-            raise ConfigError(f"--set {key}: unknown key {name!r} in {group_name} "
-                              f"(keys: {', '.join(sorted(known))})")
-        changes.setdefault(group_name, {})[name] = _parse(key, str(text), known[name])
-    groups_changed = {group: dataclasses.replace(getattr(params, group), **values) for group, values in changes.items()}
-    result = dataclasses.replace(params, **groups_changed)
+    result = with_overrides(base or SimParams(), overrides)
     _check_pairs(result)
     return result
-
-
-def _parse(key: str, text: str, spec: dataclasses.Field[Any]) -> float | int:
-    low, high = spec.metadata["low"], spec.metadata["high"]
-    try:
-        value: float | int = int(text) if isinstance(spec.default, int) else float(text)
-    except ValueError:
-        kind = "an integer" if isinstance(spec.default, int) else "a number"
-        raise ConfigError(f"--set {key}={text}: not {kind}") from None
-    if not math.isfinite(value):
-        raise ConfigError(f"--set {key}={text}: not a finite number")
-    if not low <= value <= high:
-        raise ConfigError(f"--set {key}={text}: outside [{low}, {high}] {spec.metadata['unit']}")
-    return value
 
 
 MAX_BATCH_SPAN_S = 4.0  # ImuBatch sample offsets are uint32 ns: at most 4.29 s

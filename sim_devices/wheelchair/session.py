@@ -14,11 +14,10 @@ order, and no wall-clock time enters the file (`clock.start_unix_s` is the epoch
 from __future__ import annotations
 
 import dataclasses
-import heapq
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -26,7 +25,7 @@ from protocol import keys, messages
 from protocol.errors import ConfigError
 from protocol.session import Agent, Beacon, Mount, Sensor, Session, Venue
 from protocol.messages import imu_batch
-from protocol.session_log import SessionWriter
+from sim_devices.common import Item, write_merged
 from sim_devices.wheelchair.devices import ImuStream, build_chairs, chair_streams, sensor_ids
 from sim_devices.wheelchair.impacts import Impact, contact_impacts, jolt_impacts
 from sim_devices.wheelchair.kinematics import ChairBuild
@@ -41,7 +40,6 @@ MAX_PLAYERS = 99  # ids chair01..chair99
 MAX_DURATION_S = 4 * 3600.0
 PROGRESS_STEP = 0.01  # report progress in steps of 1 %
 MOTION_SHARE = 0.5  # share of the progress bar for the motion (the rest: sensors and writing)
-Item = tuple[int, int, str, Any]  # (log_time_ns, stream order, topic, message)
 
 
 @dataclass(frozen=True)
@@ -110,7 +108,7 @@ def simulate(players: int, duration_s: float, seed: int, output: Path, params: S
                 for i, s in enumerate(streams[2::3])]
     sources += [_truth_items(motion, builds, params), _contact_items(motion, builds, params)]
     total = len(motion.time_s) * len(streams) / params.sensors.batch_samples + 1.0
-    _write(output, session, sources,
+    write_merged(output, session, sources,
            lambda written: report(MOTION_SHARE + (1.0 - MOTION_SHARE) * min(written / total, 0.99)))
     report(1.0)
     return _summary(output, players, duration_s, seed, motion, builds, streams, impacts, counts, params)
@@ -254,18 +252,6 @@ def _contact_items(motion: Motion, builds: list[ChairBuild], params: SimParams) 
 
 def _true_ns(true_s: np.ndarray, params: SimParams) -> np.ndarray:
     return params.clock.start_unix_s * 1_000_000_000 + np.round(np.asarray(true_s) * 1e9).astype(np.int64)
-
-
-def _write(output: Path, session: Session, sources: list[Iterator[Item]], progress: Callable[[int], None]) -> None:
-    try:
-        writer = SessionWriter(output, session)
-    except OSError as error:
-        raise ConfigError(f"{output}: cannot write ({error.strerror})") from None
-    with writer:
-        for count, (log_ns, _, topic, message) in enumerate(heapq.merge(*sources, key=lambda item: item[:2])):
-            writer.write(topic, message, log_ns)
-            if count % 5000 == 0:
-                progress(count)
 
 
 def _summary(output: Path, players: int, duration_s: float, seed: int, motion: Motion, builds: list[ChairBuild],
