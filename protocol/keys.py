@@ -63,6 +63,25 @@ def fix(venue: str, agent: str) -> str:
     return f"{ROOT}/{venue}/{agent}/fix"
 
 
+# Cameras share the venue's key space under the reserved agent chunk CAMERA (no agent may take it).
+CAMERA = "camera"
+
+
+def camera_tracks(venue: str, camera: str) -> str:
+    """An external tracker's frames (CameraFrame) from one camera."""
+    return f"{ROOT}/{venue}/{CAMERA}/tracks/{camera}"
+
+
+def camera_truth(venue: str, camera: str) -> str:
+    """Simulator truth for a camera's tracks (TruthTrackLabel)."""
+    return f"{ROOT}/{venue}/{CAMERA}/truth_tracks/{camera}"
+
+
+def identity(venue: str, agent: str) -> str:
+    """The hub's TrackIdentity of one agent: which camera track it is."""
+    return f"{ROOT}/{venue}/{agent}/identity"
+
+
 def all_agents(venue: str, stream: str = "**") -> str:
     """Selector for one stream kind of every agent, e.g. `reckon/demo/*/imu/*`."""
     return f"{ROOT}/{venue}/*/{stream}"

@@ -183,6 +183,44 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("stroke", "string", False),  # crawl, breaststroke, backstroke, butterfly, kick
         ("route", "string", False),  # straight, diagonal
     ],
+    # One frame of an external camera tracker: every track it reports at that instant, anonymous.
+    # timestamp_ns is the frame's time on the tracker's clock, which should be the venue clock
+    # (NTP); the hub estimates what offset remains. track_id is the tracker's own id (from 1; 0 is
+    # never a track), positions are on the court or floor, height_m is empty when the tracker
+    # gives none. position_sd_m is the tracker's stated 1-sigma error per axis.
+    "CameraFrame": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("camera_id", "string", False),
+        ("frame", "uint32", False),  # per camera, from 1: gaps are lost frames
+        ("track_id", "uint32", True),
+        ("x_m", "double", True),
+        ("y_m", "double", True),
+        ("height_m", "float", True),
+        ("position_sd_m", "float", False),
+    ],
+    # Simulator truth for one CameraFrame: who each track really is. person_id[i] belongs to
+    # track_id[i]: an agent id, an extra person's id (no sensor), "" for a false track, or ids
+    # joined by "+" when the tracker merged several people into one track.
+    "TruthTrackLabel": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("camera_id", "string", False),
+        ("frame", "uint32", False),
+        ("track_id", "uint32", True),
+        ("person_id", "string", True),
+    ],
+    # Hub: which camera track an agent is now (track_id 0: none, the agent is bridged by its own
+    # dead reckoning). Published when the identity changes and with every camera fix.
+    "TrackIdentity": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("camera_id", "string", False),
+        ("track_id", "uint32", False),
+        ("method", "string", False),
+        ("score", "float", False),  # the assignment's evidence margin over the next best (>= 0)
+    ],
     "TruthContact": [
         ("schema_version", "uint32", False),
         ("timestamp_ns", "int64", False),
@@ -228,6 +266,9 @@ TruthContact = CLASSES["TruthContact"]
 PositionFix = CLASSES["PositionFix"]
 SwimLength = CLASSES["SwimLength"]
 TruthLength = CLASSES["TruthLength"]
+CameraFrame = CLASSES["CameraFrame"]
+TruthTrackLabel = CLASSES["TruthTrackLabel"]
+TrackIdentity = CLASSES["TrackIdentity"]
 
 
 def new(name: str, **fields: Any) -> Any:

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from protocol.errors import ConfigError
-from protocol.keys import check_id
+from protocol.keys import CAMERA, check_id
 
 FORMAT_VERSION = 1
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
@@ -49,6 +49,7 @@ class Mount(str, enum.Enum):
 class AgentKind(str, enum.Enum):
     WHEELCHAIR = "wheelchair"
     SWIMMER = "swimmer"
+    PEDESTRIAN = "pedestrian"  # a person on foot: a waist sensor (the camera-identity paper) or a phone
 
 
 class Route(str, enum.Enum):
@@ -244,8 +245,11 @@ def _agent(data: dict[str, Any], where: str) -> Agent:
     for mount in set(mounts):
         if mounts.count(mount) > 1:
             raise ConfigError(f"{where}.sensors: two sensors at mount {mount.value!r}")
+    agent_id = check_id(_required(data, "id", where), f"{where}.id")
+    if agent_id == CAMERA:
+        raise ConfigError(f"{where}.id: {CAMERA!r} is reserved for camera keys; choose another agent id")
     return Agent(
-        id=check_id(_required(data, "id", where), f"{where}.id"),
+        id=agent_id,
         kind=_enum(data, "kind", where, AgentKind, "wheelchair"),
         wheel_diameter_m=_number(data, "wheel_diameter_m", where, 0.61, 0.2, 1.0),
         camber_deg=_number(data, "camber_deg", where, 17.0, 0.0, 30.0),

@@ -92,6 +92,21 @@ class Contact:
 
 
 @dataclass
+class CameraTracks:
+    """One camera's tracks, one row per (frame, track); labels from TruthTrackLabel when present."""
+
+    camera_id: str
+    frame_ns: np.ndarray  # int64 (F,): every frame, including frames that saw nobody
+    time_ns: np.ndarray  # int64 (N,): the observation's frame time
+    track_id: np.ndarray  # int64 (N,)
+    x_m: np.ndarray  # float64 (N,)
+    y_m: np.ndarray
+    height_m: np.ndarray | None  # float64 (N,), None when the tracker gives no height
+    position_sd_m: float
+    person_id: np.ndarray | None  # str (N,): "" false track, "a+b" a merge; None without truth
+
+
+@dataclass
 class SessionData:
     session: Session
     imu: dict[str, ImuSeries]
@@ -100,6 +115,7 @@ class SessionData:
     contacts: list[Contact]
     problems: list[str] = field(default_factory=list)
     lengths: dict[str, list[Any]] = field(default_factory=dict)  # agent id -> TruthLength messages, in time order
+    cameras: dict[str, CameraTracks] = field(default_factory=dict)
 
     @property
     def start_ns(self) -> int:
@@ -206,6 +222,8 @@ def read_session(path: Path | str) -> SessionData:
     sighting_rows: dict[str, list[tuple[int, str, float]]] = defaultdict(list)
     contacts: list[Contact] = []
     lengths: dict[str, list[Any]] = defaultdict(list)
+    frames: dict[str, list[Any]] = defaultdict(list)
+    labels: dict[str, dict[int, Any]] = defaultdict(dict)
     for _, _, msg in log_messages:
         kind = msg.DESCRIPTOR.name
         if kind == "ImuBatch":
@@ -219,6 +237,10 @@ def read_session(path: Path | str) -> SessionData:
                                     messages.ContactKind(msg.kind), msg.closing_speed_mps))
         elif kind == "TruthLength":
             lengths[msg.agent_id].append(msg)
+        elif kind == "CameraFrame":
+            frames[msg.camera_id].append(msg)
+        elif kind == "TruthTrackLabel":
+            labels[msg.camera_id][msg.frame] = msg
     session, skipped = log_messages.session, log_messages.skipped
     if session is None:
         raise InputError(f"{path}: not a reckon session (no '{METADATA_NAME}' metadata record"
@@ -242,7 +264,30 @@ def read_session(path: Path | str) -> SessionData:
         log.warning("%s", problem)
     for rows in lengths.values():
         rows.sort(key=lambda m: m.timestamp_ns)
-    return SessionData(session, imu, truth, sightings, contacts, problems, dict(lengths))
+    cameras = {camera_id: _camera_tracks(camera_id, rows, labels.get(camera_id)) for camera_id, rows in frames.items()}
+    return SessionData(session, imu, truth, sightings, contacts, problems, dict(lengths), cameras)
+
+
+def _camera_tracks(camera_id: str, rows: list[Any], labels: dict[int, Any] | None) -> CameraTracks:
+    rows.sort(key=lambda m: (m.timestamp_ns, m.frame))
+    counts = [len(m.track_id) for m in rows]
+    with_height = all(len(m.height_m) == len(m.track_id) for m in rows) and any(counts)
+    person = None
+    if labels:
+        person = []
+        for m in rows:
+            label = labels.get(m.frame)
+            names = dict(zip(label.track_id, label.person_id)) if label is not None else {}
+            person += [names.get(t, "") for t in m.track_id]
+        person = np.array(person, dtype=object)
+    return CameraTracks(
+        camera_id, np.array([m.timestamp_ns for m in rows], dtype=np.int64),
+        np.repeat(np.array([m.timestamp_ns for m in rows], dtype=np.int64), counts),
+        np.concatenate([np.asarray(m.track_id, dtype=np.int64) for m in rows]) if rows else np.zeros(0, np.int64),
+        np.concatenate([np.asarray(m.x_m, dtype=np.float64) for m in rows]) if rows else np.zeros(0),
+        np.concatenate([np.asarray(m.y_m, dtype=np.float64) for m in rows]) if rows else np.zeros(0),
+        np.concatenate([np.asarray(m.height_m, dtype=np.float64) for m in rows]) if with_height else None,
+        float(rows[0].position_sd_m) if rows else 0.0, person)
 
 
 def _imu_series(agent_id: str, sensor_id: str, rows: list[Any]) -> ImuSeries:
