@@ -43,6 +43,12 @@ def test_every_message_round_trips_with_schema_version():
                            lateral_deviation_m=[0.0, 0.1, -0.05], profile_step_m=1.0, walls_detected=True),
         "TruthLength": dict(timestamp_ns=10, agent_id="a", index=2, start_ns=1, swum_distance_m=25.1,
                             lane_distance_m=25.0, stroke_count=18, stroke="crawl", route="diagonal"),
+        "CameraFrame": dict(timestamp_ns=11, camera_id="cam1", frame=4, track_id=[3, 7], x_m=[1.5, 2.0],
+                            y_m=[0.5, 4.0], height_m=[1.7, 1.6], position_sd_m=0.05),
+        "TruthTrackLabel": dict(timestamp_ns=11, camera_id="cam1", frame=4, track_id=[3, 7],
+                                person_id=["p1", "p2+extra1"]),
+        "TrackIdentity": dict(timestamp_ns=12, agent_id="p1", camera_id="cam1", track_id=3, method="reckon",
+                              score=2.5),
     }
     assert set(samples) == set(messages.TABLES)
     for name, fields in samples.items():
