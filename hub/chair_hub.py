@@ -37,7 +37,7 @@ from protocol import keys, messages
 from protocol.session import AgentKind, Mount, Session
 
 Kind = messages.CorrectionKind
-CORRECTIONS = ("beacon", "collision", "fix")
+CORRECTIONS = ("beacon", "collision", "fix", "camera")  # fix: an operator's; camera: identified tracks
 FIX_GATE_CHI2 = 13.8  # 99.9 %, 2 dof
 ACROSS_VARIANCE_M2 = 1e4  # a contact says nothing about the direction across the line between chairs
 HISTORY = 1024  # poses kept per agent for looking back to a measured time (20 s at 50 Hz)
@@ -208,7 +208,8 @@ class ChairHub:
         return self._end_passes(view)
 
     def on_fix(self, fix: Any) -> list[Any]:
-        if "fix" not in self.settings.corrections:
+        wanted = "camera" if fix.kind == Kind.VIDEO else "fix"
+        if wanted not in self.settings.corrections:
             return []
         view = self.agents[fix.agent_id]
         covariance = np.array(fix.covariance, dtype=float).reshape(2, 2) if len(fix.covariance) == 4 else None
@@ -334,7 +335,7 @@ class ChairHub:
         view.covariance = view.covariance.copy()
         view.covariance[:2, :2] = after
         view.smoother.correct(time_ns, expected, 0.5 * float(after[0, 0] + after[1, 1]))
-        view.applied[kind.name.lower() if kind != Kind.VIDEO and kind != Kind.MANUAL else "fix"] += 1
+        view.applied[{Kind.VIDEO: "camera", Kind.MANUAL: "fix"}.get(kind, kind.name.lower())] += 1
         return messages.new("Correction", timestamp_ns=int(time_ns), agent_id=view.agent_id, kind=kind,
                             dx_m=float(measured[0]), dy_m=float(measured[1]), other_agent_id=other, source_id=source,
                             sequence=view.sequence, covariance=covariance.ravel().tolist())

@@ -1,7 +1,7 @@
 """`reckon hub`: the venue's hub over Zenoh. Every agent's streams in; corrected poses and corrections out.
 
 One subscription to the agents' input streams (a blocking queue: a slow hub slows the edges
-down, it never loses a measurement) feeds `hub.chair_hub.ChairHub` on one thread, in arrival order. Its
+down, it never loses a measurement) feeds `hub.venue_hub.VenueHub` (chairs' corrections, camera identities) on one thread, in arrival order. Its
 outputs go out at once: live poses on `reckon/<venue>/<agent>/pose/live`, refined ones on
 `.../pose/refined`, corrections to the edges on `.../correction`. A swimmer's lengths
 (`.../length`, from its edge) are recorded, logged as they come and totalled in the summary. With `output`, every input and
@@ -25,7 +25,8 @@ from typing import Any, Callable
 
 import zenoh
 
-from hub.chair_hub import ChairHub, HubSettings
+from hub.chair_hub import HubSettings
+from hub.venue_hub import VenueHub
 from protocol import bus as wire
 from protocol import keys
 from protocol.errors import InputError
@@ -35,7 +36,7 @@ from reckon.bus import Alive, Publisher, Subscription, open_session
 
 log = logging.getLogger(__name__)
 POLL_S = 0.1
-INPUTS = ("imu/*", "beacon/*", "pose/edge", "event/impact", "fix", "length")
+INPUTS = ("imu/*", "beacon/*", "pose/edge", "event/impact", "fix", "length", "tracks/*")  # tracks: camera frames
 WARN_EVERY_S = 10.0
 
 
@@ -86,7 +87,7 @@ def run_hub(config: zenoh.Config, session: Session, stop: threading.Event, setti
             output: Path | None = None, ready: threading.Event | None = None,
             on_output: Callable[[Any], None] | None = None) -> HubSummary:
     """Run until `stop`; then take what was already received, flush the refined track, return."""
-    hub = ChairHub(session, settings)
+    hub = VenueHub(session, settings)
     venue = session.venue.name
     summary = HubSummary(venue)
     skipped_since, last_warning = 0, 0.0

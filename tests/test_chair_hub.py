@@ -86,7 +86,7 @@ def test_a_lone_impact_and_a_far_pair_change_nothing():
 
 
 def test_live_pose_carries_the_expected_shift_until_the_edge_acknowledges_it():
-    hub = ChairHub(venue(1), HubSettings(corrections=frozenset({"fix"})))
+    hub = ChairHub(venue(1), HubSettings(corrections=frozenset({"camera"})))
     feed_poses(hub, {"c0": (10.0, 5.0)}, 0.0, 1.0)
     fix = messages.new("PositionFix", timestamp_ns=int(0.9 * S), agent_id="c0", kind=Kind.VIDEO, x_m=11.0, y_m=5.0,
                        covariance=[0.25, 0.0, 0.0, 0.25], source_id="camera-1")

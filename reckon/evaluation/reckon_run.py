@@ -21,14 +21,15 @@ import numpy as np
 from edge.chair_edge import ChairEdge
 from edge.chair_merger import ChairMerger
 from edge.chair_estimator import ChairSample
-from hub.chair_hub import ChairHub, HubSettings
+from hub.chair_hub import HubSettings
+from hub.venue_hub import VenueHub
 from protocol import messages
-from protocol.session import Session
+from protocol.session import AgentKind, Session
 from protocol.session_log import LogMessages
 from reckon.evaluation.inputs import AgentInputs
 
 RECKON_CORRECTIONS = ("beacon", "collision")
-INPUT_TYPES = ("ImuBatch", "BeaconSighting")
+INPUT_TYPES = ("ImuBatch", "BeaconSighting", "CameraFrame")
 
 
 @dataclass
@@ -49,24 +50,31 @@ def log_inputs(path: Path | str) -> list[tuple[int, Any]]:
     return out
 
 
-def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubSettings) -> tuple[ChairHub, dict, dict]:
-    """(hub, live, refined): per agent, arrays (time_ns, x, y) of the hub's two tracks."""
-    hub = ChairHub(session, settings)
-    edges = {agent.id: ChairEdge(agent, settings.pose_rate_hz) for agent in session.agents}
+def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubSettings,
+                 identities: list[Any] | None = None) -> tuple[VenueHub, dict, dict]:
+    """(hub, live, refined): per agent, arrays (time_ns, x, y) of the hub's two tracks.
+
+    `identities`, if given, receives the hub's TrackIdentity messages in order."""
+    hub = VenueHub(session, settings)
+    edges = {agent.id: ChairEdge(agent, settings.pose_rate_hz) for agent in session.agents
+             if agent.kind is AgentKind.WHEELCHAIR}
     tracks: dict[int, dict[str, list]] = {messages.Track.LIVE: {}, messages.Track.REFINED: {}}
 
     def to_hub(message: Any, arrival_ns: int) -> None:
         for out in hub.on_message(message, arrival_ns):
             if messages.type_name(out) == "Correction":
                 edges[out.agent_id].correct(out)
+            elif messages.type_name(out) == "TrackIdentity":
+                if identities is not None:
+                    identities.append(out)
             else:
                 tracks[out.track].setdefault(out.agent_id, []).append((out.timestamp_ns, out.x_m, out.y_m))
 
     arrival_ns = 0
     for arrival_ns, message in inputs:
         to_hub(message, arrival_ns)
-        edge = edges.get(message.agent_id)
-        if edge is not None and messages.type_name(message) == "ImuBatch":
+        edge = edges.get(message.agent_id) if messages.type_name(message) == "ImuBatch" else None
+        if edge is not None:
             for out in edge.push(message):
                 to_hub(out, arrival_ns)
     for edge in edges.values():

@@ -1,0 +1,417 @@
+"""Who is which camera track: streaming association of anonymous tracks with the agents' sensors.
+
+The camera-identity paper (hub/track_paper.py) scores whole fragments offline and tries every
+order of people. Here every hop (HOP_S of camera time) the newest bins of motion cues
+(hub/identity_cues.py) of every live track are compared with every agent's:
+- speed: a chair's dead-reckoned speed, a pedestrian's from its waist activity (the paper's cue);
+- turn rate: gyro about the vertical against the rotation of the track's velocity;
+- moving or still;
+- position: the track against where the agent was last seen or, for a chair, the hub's pose.
+Each bin gives a normalised squared error per cue (about 1 for the right pair). A pair's evidence
+is the forgetting mean of its bins' costs (factor FORGET_PER_S per second, after a prior that
+makes a new track earn its identity). The assignment is the Hungarian method (scipy) over tracks
+and agents with "nobody" on both sides at NOBODY_COST, the current pairs favoured by
+SWITCH_MARGIN so identities do not flicker. Work per hop is tracks x agents x new bins.
+
+An identified track gives its agent a PositionFix (kind VIDEO) every FIX_EVERY_S while the pair's
+evidence is clear; the hub turns it into a correction like any fix. An agent without a track is
+carried by its own dead reckoning (the hub's pose) until a track matches again.
+The camera's clock offset is searched (±MAX_LAG_S) on the identified pairs every LAG_EVERY_S.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from hub.clocks import ClockOffsets
+from hub.identity_cues import (BIN_NS, BIN_S, MOVING_MPS, TRACK_DELAY_BINS, AgentCues, SpeedModel, TrackCues,
+                               turn_rate)
+from protocol import messages
+from protocol.messages import CorrectionKind
+from protocol.session import AgentKind, Mount, Session
+
+METHOD = "reckon"
+BIG = 1e6
+
+
+@dataclass(frozen=True)
+class IdentitySettings:
+    hop_s: float = 0.5
+    delay_s: float = 1.0  # bins are scored this long after the camera saw them: the IMU has arrived by then
+    forget_per_s: float = 0.85  # evidence half-life about 4 s (algorithms.md: 0.9-0.97 per s with 2-4 s windows)
+    prior_bins: float = 8.0  # a new pair starts with this many bins at prior_cost
+    prior_cost: float = 2.0
+    nobody_cost: float = 0.6  # each side; a pair is taken when its evidence is below twice this
+    claim_margin: float = 0.3  # a new identity must be this much better than the best assignment without it
+    max_claims: int = 8  # new identities examined per hop (each costs one more assignment); the rest wait
+    switch_margin: float = 0.4
+    fix_every_s: float = 1.0
+    fix_cost: float = 0.6  # evidence needed to send a fix
+    fix_after_s: float = 2.0  # ... held for this long
+    track_timeout_s: float = 1.5
+    max_lag_s: float = 0.5
+    lag_every_s: float = 5.0
+    speed_sd_mps: float = 0.35
+    yaw_sd_dps: float = 25.0
+    moving_sd: float = 0.7
+    position_sd_m: float = 0.5  # beyond the camera's own error, for where an agent is expected
+    walk_mps: float = 1.5  # how fast a pedestrian's expected position loses certainty when unseen
+    clip: float = 9.0  # one bin's normalised squared error never counts more than this (3 sigma)
+
+    def __post_init__(self) -> None:
+        checks = {"hop_s": (0.1, 10.0), "delay_s": (0.0, 10.0), "forget_per_s": (0.01, 1.0), "prior_bins": (0.0, 1e3),
+                  "nobody_cost": (0.0, 100.0), "claim_margin": (0.0, 100.0), "switch_margin": (0.0, 100.0),
+                  "fix_every_s": (0.0, 3600.0), "track_timeout_s": (0.0, 60.0), "max_lag_s": (0.0, 5.0),
+                  "speed_sd_mps": (1e-3, 10.0), "yaw_sd_dps": (1e-3, 1e3), "moving_sd": (1e-3, 10.0),
+                  "position_sd_m": (1e-3, 100.0)}
+        for name, (low, high) in checks.items():
+            value = getattr(self, name)
+            if not low <= value <= high:
+                raise ValueError(f"IdentitySettings.{name} = {value}: must be within [{low}, {high}]")
+
+
+@dataclass
+class _Track:
+    cues: TrackCues
+    cost_sum: np.ndarray  # per agent, forgetting sum of bin costs
+    cost_count: np.ndarray
+    agent: int = -1
+    held_since_ns: int = 0
+    last_fix_ns: int = 0
+
+
+@dataclass
+class IdentityCounters:
+    updates: int = 0
+    pair_bins: int = 0  # cue comparisons: tracks x agents x bins, summed over updates
+    max_pair_bins: int = 0  # ... in the largest update
+    solves: int = 0  # assignment problems solved (one per hop, one more per examined new identity)
+    identity_changes: int = 0
+    fixes: int = 0
+    frames: int = 0
+    tracks: int = 0
+    lag_bins: int = 0
+
+
+class IdentityEngine:
+    """`on_message(message)` -> outputs (TrackIdentity, PositionFix); `assignment()` now."""
+
+    def __init__(self, session: Session, settings: IdentitySettings = IdentitySettings(),
+                 pose_of: Callable[[str, int], tuple[np.ndarray, float] | None] | None = None):
+        self.settings = settings
+        self.venue = session.venue.name
+        self.pose_of = pose_of  # the hub's (xy, sd) of an agent at a venue time, when it has one
+        self.clocks = ClockOffsets()
+        self.agents: list[AgentCues] = []
+        self.kinds: list[AgentKind] = []
+        for agent in session.agents:
+            sensor = agent.sensor(Mount.SEAT) or agent.sensor(Mount.WAIST) or next(
+                (s for s in agent.sensors if not s.mount.on_wheel), None)
+            if sensor is None or agent.kind is AgentKind.SWIMMER:
+                continue
+            self.agents.append(AgentCues(agent.id, sensor.id, sensor.rate_hz))
+            self.kinds.append(agent.kind)
+        self.index = {cues.agent_id: i for i, cues in enumerate(self.agents)}
+        self.by_sensor = {cues.sensor_id: i for i, cues in enumerate(self.agents)}
+        count = len(self.agents)
+        self.seen_xy = np.full((count, 2), np.nan)  # where each agent's track last was
+        self.seen_ns = np.zeros(count, dtype=np.int64)
+        self.speed_model = SpeedModel()
+        self.tracks: dict[tuple[str, int], _Track] = {}
+        self.scored_until: dict[str, int] = {}  # camera -> first bin not yet scored
+        self.newest_bin: dict[str, int] = {}
+        self.next_lag_bin: dict[str, int] = {}
+        self.lag_bins: dict[str, int] = {}
+        self.counters = IdentityCounters()
+
+    # -- inputs ------------------------------------------------------------------------------
+
+    def on_message(self, message: Any) -> list[Any]:
+        name = messages.type_name(message)
+        if name == "CameraFrame":
+            return self.on_frame(message)
+        if name == "ImuBatch":
+            self.on_imu(message)
+        elif name == "EstimatedPose":  # the hub passes only its edges' poses (pose/edge), never its own
+            self.on_edge_pose(message)
+        return []
+
+    def on_imu(self, batch: Any) -> None:
+        i = self.by_sensor.get(batch.sensor_id)
+        if i is None or not len(batch.sample_offset_ns):
+            return
+        if batch.received_ns:
+            self.clocks.observe(batch.sensor_id, batch.timestamp_ns + batch.sample_offset_ns[-1], batch.received_ns)
+        times = batch.timestamp_ns + np.asarray(batch.sample_offset_ns, dtype=np.int64) + self.clocks.offset_ns(batch.sensor_id)
+        self.agents[i].push_imu(times, np.asarray(batch.accel_g, dtype=float).reshape(-1, 3),
+                                np.asarray(batch.gyro_dps, dtype=float).reshape(-1, 3))
+
+    def on_edge_pose(self, pose: Any) -> None:
+        i = self.index.get(pose.agent_id)
+        if i is None:
+            return
+        cues = self.agents[i]
+        cues.push_pose(self.clocks.to_venue(cues.sensor_id, pose.timestamp_ns), pose.x_m, pose.y_m, pose.heading_rad)
+
+    def on_frame(self, frame: Any) -> list[Any]:
+        camera = frame.camera_id
+        self.counters.frames += 1
+        lag_ns = self.lag_bins.get(camera, 0) * BIN_NS
+        time_ns = frame.timestamp_ns - lag_ns
+        for track_id, x, y in zip(frame.track_id, frame.x_m, frame.y_m):
+            key = (camera, int(track_id))
+            track = self.tracks.get(key)
+            if track is None:
+                track = self.tracks[key] = _Track(TrackCues(int(track_id)), np.zeros(len(self.agents)),
+                                                  np.zeros(len(self.agents)))
+                self.counters.tracks += 1
+            track.cues.push(time_ns, float(x), float(y))
+        bin_now = time_ns // BIN_NS
+        self.newest_bin[camera] = max(self.newest_bin.get(camera, bin_now), bin_now)
+        first = self.scored_until.setdefault(camera, bin_now)
+        end = bin_now - int(round(self.settings.delay_s / BIN_S))
+        if end - first < int(round(self.settings.hop_s / BIN_S)):
+            return []
+        self.scored_until[camera] = end
+        return self._update(camera, first, end, frame.position_sd_m, time_ns)
+
+    # -- one hop -----------------------------------------------------------------------------
+
+    def _update(self, camera: str, first: int, end: int, camera_sd_m: float, now_ns: int) -> list[Any]:
+        s = self.settings
+        timeout = int(s.track_timeout_s * 1e9)
+        out = [self._drop(k, now_ns) for k, t in list(self.tracks.items())
+               if k[0] == camera and now_ns - t.cues.last_ns > timeout]
+        out = [message for message in out if message is not None]
+        keys = [k for k in self.tracks if k[0] == camera]
+        if not keys or not self.agents:
+            return out
+        tracks = [self.tracks[k] for k in keys]
+        count = end - first
+        agent_cues = self._agent_windows(first, count)
+        costs = self._bin_costs(tracks, agent_cues, first, count, camera_sd_m)  # (T, A, bins), NaN = not comparable
+        forget = s.forget_per_s ** (count * BIN_S)
+        for row, track in enumerate(tracks):
+            valid = np.isfinite(costs[row])
+            track.cost_sum = track.cost_sum * forget + np.where(valid, costs[row], 0.0).sum(axis=1)
+            track.cost_count = track.cost_count * forget + valid.sum(axis=1)
+        self.counters.updates += 1
+        work = len(tracks) * len(self.agents) * count
+        self.counters.pair_bins += work
+        self.counters.max_pair_bins = max(self.counters.max_pair_bins, work)
+        evidence = np.array([(t.cost_sum + s.prior_cost * s.prior_bins) / (t.cost_count + s.prior_bins) for t in tracks])
+        out += self._assign(camera, keys, tracks, evidence, now_ns)
+        out += self._fixes(camera, tracks, evidence, now_ns, camera_sd_m)
+        self._learn_speed(tracks, evidence, first, count)
+        if end >= self.next_lag_bin.get(camera, end):
+            self.next_lag_bin[camera] = end + int(s.lag_every_s / BIN_S)
+            self._search_lag(camera, tracks, end)
+        return out
+
+    def _agent_windows(self, first: int, count: int) -> dict[str, np.ndarray]:
+        """Every agent's cues for the track bins first..first+count-1 (an agent's are TRACK_DELAY_BINS older)."""
+        start = first - TRACK_DELAY_BINS
+        speed, yaw = [], []
+        for cues, kind in zip(self.agents, self.kinds):
+            ring = cues.ring
+            dr_speed = ring.window("speed_dr", start, count)
+            if kind is AgentKind.WHEELCHAIR and np.isfinite(dr_speed).any():
+                speed.append(dr_speed)
+                yaw.append(turn_rate(lambda b, n: ring.window("heading_dr", b, n), start, count))
+            else:
+                speed.append(self.speed_model.predict(ring.window("activity", first, count)))  # already as slow as a fit
+                yaw.append(turn_rate(lambda b, n: ring.window("heading", b, n), start, count))
+        speed_array = np.array(speed)
+        moving = np.where(np.isfinite(speed_array), speed_array > MOVING_MPS, np.nan)
+        return {"speed": speed_array, "yaw": np.array(yaw), "moving": moving}
+
+    def _bin_costs(self, tracks: list[_Track], agent: dict[str, np.ndarray], first: int, count: int,
+                   camera_sd_m: float) -> np.ndarray:
+        s = self.settings
+        t_speed = np.array([t.cues.speed(first, count) for t in tracks])
+        t_yaw = np.array([t.cues.turn_rate(first, count) for t in tracks])
+        t_x = np.array([t.cues.ring.window("x", first, count) for t in tracks])
+        t_y = np.array([t.cues.ring.window("y", first, count) for t in tracks])
+        t_moving = np.where(np.isfinite(t_speed), t_speed > MOVING_MPS, np.nan)
+
+        def normalised(track_values: np.ndarray, agent_values: np.ndarray, sd: float) -> np.ndarray:
+            return np.minimum(((track_values[:, None, :] - agent_values[None, :, :]) / sd) ** 2, s.clip)
+
+        parts = [normalised(t_speed, agent["speed"], s.speed_sd_mps),
+                 normalised(t_moving, agent["moving"], s.moving_sd),
+                 normalised(t_yaw, agent["yaw"], s.yaw_sd_dps)]
+        position = self._position_cost(tracks, t_x, t_y, first, count, camera_sd_m)
+        if position is not None:
+            parts.append(position)
+        stack = np.stack(parts)
+        present = np.isfinite(stack)
+        # each cue adds its excess over what the right pair would show on average (1, a normalised
+        # squared error); a bin counts once its speed (both sides) is known
+        excess = np.where(present, stack - 1.0, 0.0).sum(axis=0)
+        return np.where(present[0], excess, np.nan)
+
+    def _position_cost(self, tracks: list[_Track], t_x: np.ndarray, t_y: np.ndarray, first: int, count: int,
+                       camera_sd_m: float) -> np.ndarray | None:
+        """Where each agent is expected: a chair where the hub has it; an agent without a track where
+        its last track ended, less certain as time passes. An agent's current track is not compared
+        with where that same track was: that would only confirm whatever identity it has."""
+        s = self.settings
+        times = (np.arange(first, first + count) + 0.5) * BIN_NS
+        expected = np.full((len(self.agents), count, 2), np.nan)
+        sd = np.full((len(self.agents), count), np.nan)
+        holding = {t.agent for t in self.tracks.values() if t.agent >= 0}
+        for i, cues in enumerate(self.agents):
+            pose = self.pose_of(cues.agent_id, int(times[-1])) if self.pose_of else None
+            if pose is not None:
+                expected[i] = pose[0]
+                sd[i] = np.hypot(pose[1], s.position_sd_m)
+            elif i not in holding and np.isfinite(self.seen_xy[i, 0]):
+                expected[i] = self.seen_xy[i]
+                age_s = np.maximum(times - self.seen_ns[i], 0) * 1e-9
+                sd[i] = np.hypot(s.position_sd_m + s.walk_mps * age_s, camera_sd_m)
+        if not np.isfinite(sd).any():
+            return None
+        dx = t_x[:, None, :] - expected[None, :, :, 0]
+        dy = t_y[:, None, :] - expected[None, :, :, 1]
+        return np.minimum((dx * dx + dy * dy) / (2 * sd[None] ** 2), self.settings.clip)
+
+    def _assign(self, camera: str, keys: list[tuple[str, int]], tracks: list[_Track], evidence: np.ndarray,
+                now_ns: int) -> list[Any]:
+        s = self.settings
+        n_tracks, n_agents = evidence.shape
+        cost = evidence.copy()
+        for row, track in enumerate(tracks):
+            if track.agent >= 0:
+                cost[row, track.agent] -= s.switch_margin
+        held = {t.agent for k, t in self.tracks.items() if k[0] != camera and t.agent >= 0}
+        for i in held:  # an agent another camera holds is not available here
+            cost[:, i] = BIG
+        matrix = self._matrix(cost)
+        rows, cols = linear_sum_assignment(matrix)
+        self.counters.solves += 1
+        best = float(matrix[rows, cols].sum())
+        chosen = {r: c for r, c in zip(rows, cols) if r < n_tracks and c < n_agents}
+        out = []
+        solves = 0
+        for row, (key, track) in enumerate(zip(keys, tracks)):
+            agent = chosen.get(row, -1)
+            if agent >= 0 and agent != track.agent:
+                # a new identity must beat every assignment without it by claim_margin: two people
+                # standing still look alike, and no identity is better than a guess
+                solves += 1
+                if solves > s.max_claims or self._exclusion_margin(matrix, best, row, agent) < s.claim_margin:
+                    agent = -1
+                self.counters.solves += solves <= s.max_claims
+            if agent == track.agent:
+                continue
+            if track.agent >= 0:
+                out.append(self._identity(track.agent, camera, 0, 0.0, now_ns))  # lost this track
+            track.agent = agent
+            track.held_since_ns = now_ns
+            self.counters.identity_changes += 1
+            if agent >= 0:
+                out.append(self._identity(agent, camera, key[1], self._margin(evidence, row, agent), now_ns))
+        return out
+
+    def _matrix(self, cost: np.ndarray) -> np.ndarray:
+        """Tracks x agents, padded with a "nobody" column per track and a "nobody" row per agent."""
+        n_tracks, n_agents = cost.shape
+        size = n_tracks + n_agents
+        matrix = np.full((size, size), BIG)
+        matrix[:n_tracks, :n_agents] = cost
+        matrix[:n_tracks, n_agents:][np.diag_indices(n_tracks)] = self.settings.nobody_cost
+        matrix[n_tracks:, :n_agents][np.diag_indices(n_agents)] = self.settings.nobody_cost
+        matrix[n_tracks:, n_agents:] = 0.0
+        return matrix
+
+    @staticmethod
+    def _exclusion_margin(matrix: np.ndarray, best: float, row: int, col: int) -> float:
+        """How much worse the best assignment gets when this pair is forbidden."""
+        saved = matrix[row, col]
+        matrix[row, col] = BIG
+        rows, cols = linear_sum_assignment(matrix)
+        cost = float(matrix[rows, cols].sum())
+        matrix[row, col] = saved
+        return cost - best
+
+    def _margin(self, evidence: np.ndarray, row: int, agent: int) -> float:
+        others = np.concatenate([np.delete(evidence[:, agent], row), np.delete(evidence[row], agent),
+                                 [2 * self.settings.nobody_cost]])
+        return float(max(others.min() - evidence[row, agent], 0.0))
+
+    def _fixes(self, camera: str, tracks: list[_Track], evidence: np.ndarray, now_ns: int,
+               camera_sd_m: float) -> list[Any]:
+        s = self.settings
+        out = []
+        for row, track in enumerate(tracks):
+            i = track.agent
+            if i < 0:
+                continue
+            xy = track.cues.latest_xy
+            self.seen_xy[i], self.seen_ns[i] = xy, track.cues.last_ns
+            if evidence[row, i] > s.fix_cost or now_ns - track.held_since_ns < s.fix_after_s * 1e9:
+                continue
+            if track.cues.last_ns - track.last_fix_ns < s.fix_every_s * 1e9:
+                continue
+            track.last_fix_ns = track.cues.last_ns
+            variance = max(camera_sd_m, 0.05) ** 2
+            out.append(messages.new("PositionFix", timestamp_ns=int(track.cues.last_ns), agent_id=self.agents[i].agent_id,
+                                    kind=CorrectionKind.VIDEO, x_m=float(xy[0]), y_m=float(xy[1]),
+                                    covariance=[variance, 0.0, 0.0, variance], source_id=f"{camera}:{track.cues.track_id}"))
+            self.counters.fixes += 1
+        return out
+
+    def _learn_speed(self, tracks: list[_Track], evidence: np.ndarray, first: int, count: int) -> None:
+        """Refit the activity-to-speed line on pedestrians whose identity is clear (never on a doubtful pair)."""
+        for row, track in enumerate(tracks):
+            i = track.agent
+            if i < 0 or self.kinds[i] is not AgentKind.PEDESTRIAN:
+                continue
+            if evidence[row, i] > self.settings.fix_cost:
+                continue
+            self.speed_model.learn(self.agents[i].ring.window("activity", first, count), track.cues.speed(first, count))
+
+    def _search_lag(self, camera: str, tracks: list[_Track], end: int) -> None:
+        """Shift the camera's bins against the agents' to where the identified pairs' turn rates agree best."""
+        s = self.settings
+        pairs = [(t, t.agent) for t in tracks if t.agent >= 0]
+        if not pairs:
+            return
+        span = int(4.0 / BIN_S)
+        max_lag = int(round(s.max_lag_s / BIN_S))
+        scores = np.zeros(2 * max_lag + 1)
+        counts = np.zeros(2 * max_lag + 1)
+        for track, i in pairs:
+            t_yaw = track.cues.turn_rate(end - span, span)
+            name = "heading_dr" if np.isfinite(self.agents[i].ring.window("heading_dr", end - span, span)).any() else "heading"
+            ring = self.agents[i].ring
+            for k, lag in enumerate(range(-max_lag, max_lag + 1)):
+                a_yaw = turn_rate(lambda b, n: ring.window(name, b, n), end - span - TRACK_DELAY_BINS - lag, span)
+                d = (t_yaw - a_yaw) / s.yaw_sd_dps
+                ok = np.isfinite(d)
+                scores[k] += np.minimum(d[ok] ** 2, s.clip).sum()
+                counts[k] += ok.sum()
+        if counts.min() < 20:
+            return
+        mean = scores / counts
+        best = int(np.argmin(mean)) - max_lag
+        if mean[best + max_lag] < mean[max_lag] - 0.2:  # move only when clearly better than no change
+            self.lag_bins[camera] = self.lag_bins.get(camera, 0) + best
+            self.counters.lag_bins = self.lag_bins[camera]
+
+    def _drop(self, key: tuple[str, int], now_ns: int) -> Any | None:
+        """Forget a track the camera lost; its agent, if any, now has no track."""
+        track = self.tracks.pop(key)
+        return self._identity(track.agent, key[0], 0, 0.0, now_ns) if track.agent >= 0 else None
+
+    def _identity(self, agent: int, camera: str, track_id: int, score: float, now_ns: int) -> Any:
+        return messages.new("TrackIdentity", timestamp_ns=int(now_ns), agent_id=self.agents[agent].agent_id,
+                            camera_id=camera, track_id=int(track_id), method=METHOD, score=float(score))
+
+    def assignment(self) -> dict[str, tuple[str, int]]:
+        """agent id -> (camera, track id) for every agent that has a track now."""
+        return {self.agents[t.agent].agent_id: key for key, t in self.tracks.items() if t.agent >= 0}

@@ -1,0 +1,219 @@
+"""Motion cues of agents (from their IMU and dead reckoning) and of camera tracks, on one time grid.
+
+Both sides are reduced to the same few signals every BIN_S of venue time, so a track and an agent
+can be compared bin by bin:
+- `speed` (m/s): a track's from its positions; a chair's from its edge's dead-reckoned poses; a
+  pedestrian's predicted from the vertical activity of the waist (the camera-identity paper's
+  regression of vertical acceleration on speed, inverted) by `SpeedModel`.
+- `yaw` (deg/s): turn rate about the vertical over TURN_BINS: the gyro projected on the gravity
+  direction, integrated to a heading; a track's from the rotation of its velocity between fits
+  (only meaningful while it moves). A track's cues describe its last TRACK_FIT_S, so an agent's
+  instantaneous cues are compared TRACK_DELAY_BINS earlier.
+- `moving` (0/1): speed above MOVING_MPS; for a pedestrian, activity above its threshold.
+
+Everything is stored in fixed rings of CAPACITY bins (the comparison window plus margin), so
+memory is constant per agent and per live track.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy.signal import lfilter
+
+BIN_S = 0.1
+BIN_NS = int(BIN_S * 1e9)
+CAPACITY = 128  # bins kept: 12.8 s, more than the window plus the lag search
+MOVING_MPS = 0.3
+GRAVITY_TAU_S = 1.0  # low-pass that tracks the gravity direction through turns and tilts
+ACTIVITY_TAU_S = 0.5  # RMS of the vertical acceleration over about one stride
+TRACK_FIT_S = 0.5  # a track's velocity: line fit over its last half second of positions
+TRACK_DELAY_BINS = 2  # ... so it describes the motion about a quarter second ago
+TURN_BINS = 5  # turn rates over half a second: the pelvis' rotation at the step frequency averages out
+NO_BIN = -(2**62)
+
+
+class Ring:
+    """Per-bin values of several named signals; the bin number is the key, old bins are overwritten."""
+
+    def __init__(self, names: tuple[str, ...], capacity: int = CAPACITY):
+        self.capacity = capacity
+        self.bins = np.full(capacity, NO_BIN, dtype=np.int64)
+        self.values = {name: np.full(capacity, np.nan) for name in names}
+        self.newest = NO_BIN
+
+    def put(self, bin_number: int, **values: float) -> None:
+        slot = bin_number % self.capacity
+        self.bins[slot] = bin_number
+        for name, value in values.items():
+            self.values[name][slot] = value
+        self.newest = max(self.newest, bin_number)
+
+    def window(self, name: str, first_bin: int, count: int) -> np.ndarray:
+        """Values of bins first_bin .. first_bin + count - 1; NaN where a bin is missing."""
+        wanted = np.arange(first_bin, first_bin + count)
+        slots = wanted % self.capacity
+        return np.where(self.bins[slots] == wanted, self.values[name][slots], np.nan)
+
+
+def _alpha(tau_s: float, dt_s: float) -> float:
+    return float(min(1.0, dt_s / tau_s))
+
+
+@dataclass
+class SpeedModel:
+    """Walking speed from the waist's vertical activity (RMS, g): speed = slope * (activity - floor).
+
+    The paper fits vertical acceleration on speed beforehand on labelled data (r = 0.91); here the
+    line starts from a prior and is refitted online from the pairs the hub has identified, so a
+    venue's people and sensors calibrate it without labels. The prior is deliberately loose.
+    """
+
+    slope_mps_per_g: float = 6.0
+    floor_g: float = 0.03
+    prior_weight: float = 50.0  # the prior counts as this many bins of evidence
+    forget_per_bin: float = 0.999
+    _sums: np.ndarray = field(default_factory=lambda: np.zeros(5))  # n, sa, ss, saa, sas
+
+    def __post_init__(self) -> None:
+        self._sums = self._prior()
+
+    def _prior(self) -> np.ndarray:
+        activity = np.array([self.floor_g, self.floor_g + 0.1])
+        speed = self.slope_mps_per_g * (activity - self.floor_g)
+        w = self.prior_weight / 2
+        return np.array([2 * w, w * activity.sum(), w * speed.sum(), w * (activity**2).sum(), w * (activity * speed).sum()])
+
+    def predict(self, activity_g: np.ndarray) -> np.ndarray:
+        n, sa, ss, saa, sas = self._sums
+        var = saa - sa * sa / n
+        slope = (sas - sa * ss / n) / var if var > 1e-12 else self.slope_mps_per_g
+        slope = max(slope, 0.5)  # activity must not predict less speed as it grows
+        intercept = (ss - slope * sa) / n
+        return np.clip(intercept + slope * activity_g, 0.0, None)
+
+    def learn(self, activity_g: np.ndarray, speed_mps: np.ndarray) -> None:
+        ok = np.isfinite(activity_g) & np.isfinite(speed_mps)
+        if not ok.any():
+            return
+        a, s = activity_g[ok], speed_mps[ok]
+        keep = self.forget_per_bin ** len(a)
+        self._sums = self._sums * keep + np.array([len(a), a.sum(), s.sum(), (a * a).sum(), (a * s).sum()])
+
+
+class AgentCues:
+    """One agent's cues from its body IMU (pedestrian waist, chair seat) and, for chairs, its edge poses."""
+
+    NAMES = ("activity", "heading", "speed_dr", "heading_dr")
+
+    def __init__(self, agent_id: str, sensor_id: str, rate_hz: float):
+        self.agent_id = agent_id
+        self.sensor_id = sensor_id
+        dt = 1.0 / rate_hz
+        self.filters = {name: (np.array([a]), np.array([1.0, a - 1.0])) for name, a in
+                        (("gravity", _alpha(GRAVITY_TAU_S, dt)), ("activity", _alpha(ACTIVITY_TAU_S, dt)))}
+        self.dt_s = dt
+        self.heading_deg = 0.0
+        self.state: dict[str, np.ndarray] | None = None
+        self.ring = Ring(self.NAMES)
+        self.last_bin = NO_BIN
+        self.last_pose: tuple[int, float, float, float] | None = None
+        self.samples = 0
+
+    def push_imu(self, time_ns: np.ndarray, accel_g: np.ndarray, gyro_dps: np.ndarray) -> None:
+        """Samples in venue time, in order; bins that end inside the batch get their values."""
+        if len(time_ns) == 0:
+            return
+        if self.state is None:
+            settled = np.asarray(accel_g[0]) * (1.0 - self.filters["gravity"][0][0])  # as if it had always read this
+            self.state = {"gravity": settled.reshape(1, 3), "activity": np.zeros(1)}
+        self.samples += len(time_ns)
+        b, a = self.filters["gravity"]
+        gravity, zi = lfilter(b, a, accel_g, axis=0, zi=self.state["gravity"])
+        self.state["gravity"] = zi
+        norm = np.linalg.norm(gravity, axis=1)
+        unit = gravity / np.maximum(norm, 1e-6)[:, None]
+        vertical = np.einsum("ij,ij->i", accel_g, unit) - norm
+        b, a = self.filters["activity"]
+        power, self.state["activity"] = lfilter(b, a, vertical * vertical, zi=self.state["activity"])
+        heading = self.heading_deg + np.cumsum(np.einsum("ij,ij->i", gyro_dps, unit)) * self.dt_s
+        self.heading_deg = float(heading[-1])
+        bins = time_ns // BIN_NS
+        ends = np.flatnonzero(np.diff(np.append(bins, bins[-1] + 1)) != 0)  # last sample of each bin
+        for i in ends:
+            self.ring.put(int(bins[i]), activity=float(np.sqrt(max(power[i], 0.0))), heading=float(heading[i]))
+        self.last_bin = int(bins[-1])
+
+    def push_pose(self, time_ns: int, x_m: float, y_m: float, heading_rad: float) -> None:
+        """A dead-reckoned pose (venue time): speed since the previous one, and the heading (unwrapped)."""
+        if self.last_pose is not None:
+            t0, x0, y0, h0 = self.last_pose
+            dt = (time_ns - t0) * 1e-9
+            if dt <= 0:
+                return
+            heading_rad = h0 + (heading_rad - h0 + np.pi) % (2 * np.pi) - np.pi
+            if dt < 1.0:
+                self.ring.put(time_ns // BIN_NS, speed_dr=float(np.hypot(x_m - x0, y_m - y0) / dt),
+                              heading_dr=float(np.degrees(heading_rad)))
+        self.last_pose = (time_ns, x_m, y_m, heading_rad)
+
+
+def turn_rate(heading_deg_window: Callable[[int, int], np.ndarray], first_bin: int, count: int) -> np.ndarray:
+    """Turn rate (deg/s) at bins first..first+count-1 from a heading series, over TURN_BINS."""
+    now = heading_deg_window(first_bin, count)
+    before = heading_deg_window(first_bin - TURN_BINS, count)
+    return (now - before) / (TURN_BINS * BIN_S)
+
+
+class TrackCues:
+    """One camera track: its latest positions and, per bin, position and velocity (line fit)."""
+
+    NAMES = ("x", "y", "vx", "vy")
+
+    def __init__(self, track_id: int, fps_hint: float = 25.0):
+        self.track_id = track_id
+        size = int(TRACK_FIT_S * fps_hint * 2) + 4
+        self.times = np.zeros(size)
+        self.xy = np.zeros((size, 2))
+        self.count = 0
+        self.ring = Ring(self.NAMES)
+        self.first_ns = self.last_ns = 0
+        self.frames = 0
+
+    @property
+    def latest_xy(self) -> np.ndarray:
+        return self.xy[(self.count - 1) % len(self.times)]
+
+    def push(self, time_ns: int, x_m: float, y_m: float) -> None:
+        if self.frames == 0:
+            self.first_ns = time_ns
+        elif time_ns <= self.last_ns:
+            return
+        self.frames += 1
+        self.last_ns = time_ns
+        slot = self.count % len(self.times)
+        self.times[slot], self.xy[slot] = time_ns * 1e-9, (x_m, y_m)
+        self.count += 1
+        n = min(self.count, len(self.times))
+        t, xy = self.times[:n], self.xy[:n]
+        recent = t >= time_ns * 1e-9 - TRACK_FIT_S
+        velocity = (np.nan, np.nan)
+        if recent.sum() >= 3:
+            tc = t[recent] - t[recent].mean()
+            denominator = float(tc @ tc)
+            if denominator > 0:
+                velocity = tc @ (xy[recent] - xy[recent].mean(axis=0)) / denominator
+        self.ring.put(int(time_ns // BIN_NS), x=x_m, y=y_m, vx=float(velocity[0]), vy=float(velocity[1]))
+
+    def speed(self, first_bin: int, count: int) -> np.ndarray:
+        return np.hypot(self.ring.window("vx", first_bin, count), self.ring.window("vy", first_bin, count))
+
+    def turn_rate(self, first_bin: int, count: int) -> np.ndarray:
+        """deg/s over TURN_BINS; NaN unless the track moves at both ends (a still track's heading is noise)."""
+        vx, vy = self.ring.window("vx", first_bin, count), self.ring.window("vy", first_bin, count)
+        px, py = self.ring.window("vx", first_bin - TURN_BINS, count), self.ring.window("vy", first_bin - TURN_BINS, count)
+        angle = np.degrees(np.arctan2(px * vy - py * vx, px * vx + py * vy))
+        moving = (np.hypot(vx, vy) > MOVING_MPS) & (np.hypot(px, py) > MOVING_MPS)
+        return np.where(moving, angle / (TURN_BINS * BIN_S), np.nan)

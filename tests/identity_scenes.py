@@ -1,0 +1,91 @@
+"""Crafted scenes for the identity tests: people on given paths, their waist IMUs, a camera's tracks.
+
+The IMU is the minimum the cues need, built from the path: gravity on z plus a vertical gait
+oscillation at 2 Hz whose amplitude grows with speed (the camera-identity paper's relation), and
+the turn rate on the gyro's z. Tracks follow the paths with noise; which person a track follows
+over time is given explicitly, so a scene can switch, merge or invent tracks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from protocol import messages
+from protocol.session import Agent, AgentKind, Mount, Sensor, Session, Venue
+
+S = 1_000_000_000
+IMU_HZ = 100.0
+FPS = 20.0
+
+
+def session(people: list[str], length_m: float = 5.6, width_m: float = 3.0) -> Session:
+    agents = tuple(Agent(p, AgentKind.PEDESTRIAN, sensors=(Sensor(f"{p}-waist", Mount.WAIST, rate_hz=IMU_HZ,
+                                                                  forward_axis="+x", left_axis="+y"),))
+                   for p in people)
+    return Session(Venue("room", length_m, width_m), agents)
+
+
+def waypoints_path(points: list[tuple[float, float, float]], rate_hz: float = IMU_HZ) -> tuple[np.ndarray, np.ndarray]:
+    """(time_s, xy) sampled at rate_hz through (t, x, y) waypoints, smoothed so speed changes gently."""
+    times = np.arange(points[0][0], points[-1][0], 1.0 / rate_hz)
+    xy = np.column_stack([np.interp(times, [p[0] for p in points], [p[1] for p in points]),
+                          np.interp(times, [p[0] for p in points], [p[2] for p in points])])
+    kernel = np.hanning(int(0.6 * rate_hz))
+    kernel /= kernel.sum()
+    pad = len(kernel)
+    padded = np.vstack([np.repeat(xy[:1], pad, 0), xy, np.repeat(xy[-1:], pad, 0)])
+    smooth = np.column_stack([np.convolve(padded[:, k], kernel, mode="same") for k in range(2)])[pad:-pad]
+    return times, smooth
+
+
+def imu_batches(agent_id: str, times: np.ndarray, xy: np.ndarray, rng: np.random.Generator,
+                gait_g_per_mps: float = 0.18, clock_offset_s: float = 0.0) -> list[tuple[int, object]]:
+    """(arrival_ns, ImuBatch) every 0.2 s for a waist sensor on this path."""
+    velocity = np.gradient(xy, times, axis=0)
+    speed = np.hypot(velocity[:, 0], velocity[:, 1])
+    heading = np.unwrap(np.arctan2(velocity[:, 1], velocity[:, 0]))
+    turn_dps = np.degrees(np.gradient(heading, times)) * (speed > 0.2)
+    phase = 2 * np.pi * np.cumsum(np.where(speed > 0.2, 1.9, 0.0)) / IMU_HZ
+    accel = np.zeros((len(times), 3))
+    accel[:, 2] = 1.0 + gait_g_per_mps * speed * np.sin(phase) + rng.normal(0, 0.01, len(times))
+    accel[:, 0] = 0.05 * speed * np.sin(phase / 2) + rng.normal(0, 0.01, len(times))
+    gyro = rng.normal(0, 0.5, (len(times), 3))
+    gyro[:, 2] += turn_dps
+    device_ns = ((times + clock_offset_s) * S).astype(np.int64)
+    out = []
+    step = int(0.2 * IMU_HZ)
+    for k, start in enumerate(range(0, len(times), step)):
+        part = slice(start, start + step)
+        batch = messages.imu_batch(agent_id, f"{agent_id}-waist", k, device_ns[part], accel[part], gyro[part], None)
+        arrival = int(times[part][-1] * S) + 20_000_000
+        batch.received_ns = arrival
+        out.append((arrival, batch))
+    return out
+
+
+def camera_frames(paths: dict[str, tuple[np.ndarray, np.ndarray]], tracks: list[tuple[int, str, float, float]],
+                  rng: np.random.Generator, noise_m: float = 0.05, end_s: float | None = None,
+                  camera: str = "cam1") -> list[tuple[int, object]]:
+    """(arrival_ns, CameraFrame) at FPS. `tracks`: (track id, person or "a+b" merge or "" false, start s, end s)."""
+    end_s = end_s if end_s is not None else max(t[3] for t in tracks)
+    out = []
+    wander = {}
+    for k, t in enumerate(np.arange(0.0, end_s, 1.0 / FPS)):
+        ids, xs, ys = [], [], []
+        for track_id, who, start, end in tracks:
+            if not start <= t < end:
+                continue
+            if who == "":
+                centre = wander.setdefault(track_id, np.array([2.8, 1.5]))
+                centre += rng.normal(0, 0.03, 2)
+                position = centre
+            else:
+                people = who.split("+")
+                position = np.mean([[np.interp(t, paths[p][0], paths[p][1][:, j]) for j in range(2)] for p in people], axis=0)
+            ids.append(track_id)
+            xs.append(float(position[0] + rng.normal(0, noise_m)))
+            ys.append(float(position[1] + rng.normal(0, noise_m)))
+        frame = messages.new("CameraFrame", timestamp_ns=int(t * S), camera_id=camera, frame=k + 1, track_id=ids,
+                             x_m=xs, y_m=ys, position_sd_m=noise_m)
+        out.append((int(t * S) + 30_000_000, frame))
+    return out
