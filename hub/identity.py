@@ -21,6 +21,8 @@ The camera's clock offset is searched (±MAX_LAG_S) on the identified pairs ever
 
 from __future__ import annotations
 
+import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -127,6 +129,7 @@ class IdentityEngine:
         self.next_lag_bin: dict[str, int] = {}
         self.lag_bins: dict[str, int] = {}
         self.counters = IdentityCounters()
+        self.update_s: deque[float] = deque(maxlen=4096)  # wall time of the latest hops (reports, not control)
 
     # -- inputs ------------------------------------------------------------------------------
 
@@ -177,7 +180,10 @@ class IdentityEngine:
         if end - first < int(round(self.settings.hop_s / BIN_S)):
             return []
         self.scored_until[camera] = end
-        return self._update(camera, first, end, frame.position_sd_m, time_ns)
+        started = time.perf_counter()
+        out = self._update(camera, first, end, frame.position_sd_m, time_ns)
+        self.update_s.append(time.perf_counter() - started)
+        return out
 
     # -- one hop -----------------------------------------------------------------------------
 

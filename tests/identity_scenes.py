@@ -89,3 +89,31 @@ def camera_frames(paths: dict[str, tuple[np.ndarray, np.ndarray]], tracks: list[
                              x_m=xs, y_m=ys, position_sd_m=noise_m)
         out.append((int(t * S) + 30_000_000, frame))
     return out
+
+
+def write_scene(path, paths: dict[str, tuple[np.ndarray, np.ndarray]], tracks: list[tuple[int, str, float, float]],
+                end_s: float, seed: int = 1) -> None:
+    """The scene as a session log: truth poses, IMU batches, camera frames and their truth labels."""
+    from protocol import keys
+    from protocol.session_log import SessionWriter
+
+    rng = np.random.default_rng(seed)
+    scene = session(list(paths))
+    items = []
+    for person, (times, xy) in paths.items():
+        for arrival, batch in imu_batches(person, times, xy, rng):
+            items.append((arrival, keys.imu("room", person, batch.sensor_id), batch))
+        for k in range(0, len(times), int(IMU_HZ / 20)):
+            items.append((int(times[k] * S), keys.truth("room", person),
+                          messages.new("TruthPose", timestamp_ns=int(times[k] * S), agent_id=person,
+                                       x_m=float(xy[k, 0]), y_m=float(xy[k, 1]))))
+    for arrival, frame in camera_frames(paths, tracks, rng, end_s=end_s):
+        items.append((arrival, keys.camera_tracks("room", "cam1"), frame))
+        who = {track_id: person for track_id, person, start, end in tracks}
+        label = messages.new("TruthTrackLabel", timestamp_ns=frame.timestamp_ns, camera_id="cam1", frame=frame.frame,
+                             track_id=list(frame.track_id), person_id=[who[t] for t in frame.track_id])
+        items.append((arrival, keys.camera_truth("room", "cam1"), label))
+    items.sort(key=lambda item: item[0])
+    with SessionWriter(path, scene) as writer:
+        for log_ns, topic, message in items:
+            writer.write(topic, message, log_ns)

@@ -27,6 +27,7 @@ CORRECTION_SETS: tuple[tuple[str, ...], ...] = (
     ("beacon", "collision"), ("beacon_zone", "collision"), ("video",),
 )
 RECKON_CORRECTION_SETS: tuple[tuple[str, ...], ...] = ((), ("beacon",), ("collision",), ("beacon", "collision"))
+# with camera tracks in the session, also: ("camera",) and ("beacon", "collision", "camera")
 DETECTION_THRESHOLDS_G = tuple(float(g) for g in range(4, 13))  # the paper's Fig. 5 range
 
 
@@ -114,7 +115,8 @@ def evaluate_data(data: SessionData, path: Path, progress: Callable[[str], None]
     if all(a.seat_gyro_dps is not None for a in inputs.agents):
         progress("reckon: reading the log in arrival order")
         arrivals = log_inputs(path)
-        for corrections in RECKON_CORRECTION_SETS:
+        camera_sets = (("camera",), ("beacon", "collision", "camera")) if data.cameras else ()
+        for corrections in RECKON_CORRECTION_SETS + camera_sets:
             progress(f"reckon, corrections {'+'.join(corrections) or 'none'}")
             for track, estimate in zip(("live", "refined"),
                                        run_reckon(data.session, arrivals, inputs.frame_ns, frozenset(corrections))):

@@ -1,0 +1,298 @@
+"""`reckon eval` on a session with camera tracks: who was which track, ours against the paper's.
+
+Measures, per method:
+- time correct (the paper's measure): over every camera frame in which an agent is visible (some
+  track's truth label names it), the share where the track the method gives that agent is one
+  of the tracks showing it (a merged "a+b" track shows both);
+- IDF1 (motmetrics): agents as ground truth at their true positions, the method's identified
+  track positions as hypotheses named by agent, matched within IDF1_MATCH_M;
+- time per update: ours, the wall time of each hop of the live engine (p99); the paper's, one
+  run of its whole search over a PAPER_WINDOW_S stretch (what it would redo at each update),
+  extrapolated from the permutations it managed when n! is out of reach.
+
+Ours runs exactly as the hub runs it (reckon/evaluation/reckon_run.py, lockstep over the log).
+The paper's regression and eq. 1 constants are fitted on this session's own labels, which
+favours the paper (it fitted them on separate labelled data).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from hub.chair_hub import HubSettings
+from hub.track_paper import identify
+from hub.track_paper_fragments import training_pairs
+from hub.track_paper_features import PaperModel, fit_model, vertical_acceleration
+from protocol.session import AgentKind, Mount
+from protocol.session_log import CameraTracks, SessionData
+from reckon.evaluation.reckon_run import log_inputs, run_lockstep
+
+IDF1_MATCH_M = 1.0
+PAPER_MAX_PERMUTATIONS = 5040  # 7!: about a minute at 10 people; beyond it the search is extrapolated
+PAPER_WINDOW_S = 10.0
+
+
+@dataclass
+class IdentityRow:
+    method: str
+    agents: int
+    time_correct_pct: float | None
+    idf1: float | None
+    update_ms_p99: float | None
+    note: str = ""
+    per_agent_pct: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class IdentityReport:
+    session_path: Path
+    camera_ids: list[str]
+    rows: list[IdentityRow] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def has_cameras(data: SessionData) -> bool:
+    return bool(data.cameras)
+
+
+def evaluate_identity(data: SessionData, path: Path, progress: Callable[[str], None] = lambda _: None,
+                      arrivals: list[tuple[int, Any]] | None = None) -> IdentityReport:
+    report = IdentityReport(path, sorted(data.cameras))
+    agents = [a.id for a in data.session.agents if _body_sensor(a) is not None]
+    arrivals = arrivals if arrivals is not None else log_inputs(path)
+    progress("identity: ours (the hub's engine over the log)")
+    report.rows += _ours(data, arrivals, agents)
+    progress("identity: the paper's permutations")
+    report.rows.append(_paper(data, arrivals, agents, report.notes))
+    return report
+
+
+def _body_sensor(agent: Any) -> Any:
+    return agent.sensor(Mount.SEAT) or agent.sensor(Mount.WAIST)
+
+
+# -- ours ---------------------------------------------------------------------------------------
+
+
+def _ours(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]) -> list[IdentityRow]:
+    identities: list[Any] = []
+    hub, _, _ = run_lockstep(data.session, arrivals, HubSettings(corrections=frozenset({"camera"})), identities)
+    held: dict[str, list[tuple[int, str, int]]] = {a: [] for a in agents}
+    for message in identities:
+        if message.agent_id in held:
+            held[message.agent_id].append((message.timestamp_ns, message.camera_id, message.track_id))
+    timings = np.array(hub.identity.update_s) if hub.identity is not None else np.zeros(0)
+    assignment = {camera: {a: _held_at(held[a], camera, tracks.frame_ns) for a in agents}
+                  for camera, tracks in data.cameras.items()}
+    live = _score("reckon", data, agents, assignment)
+    live.update_ms_p99 = float(np.percentile(timings, 99) * 1e3) if len(timings) else None
+    if hub.identity is not None:
+        c = hub.identity.counters
+        live.note = (f"live; {c.updates} hops, {c.identity_changes} identity changes, {c.fixes} camera fixes, "
+                     f"camera lag {c.lag_bins * 0.1:+.1f} s")
+    refined = {camera: _back_filled(held, data.cameras[camera]) for camera, held in assignment.items()}
+    hindsight = _score("reckon", data, agents, refined)
+    hindsight.update_ms_p99 = live.update_ms_p99
+    hindsight.note = "refined: a track's identity also holds back to where the track began (offline, like the paper)"
+    return [live, hindsight]
+
+
+def _back_filled(held: dict[str, np.ndarray], tracks: CameraTracks) -> dict[str, np.ndarray]:
+    """Each identity extended back over the frames before it was decided, while its track was already
+    there, nobody else held it and the agent held nothing else."""
+    frame_of_row = np.searchsorted(tracks.frame_ns, tracks.time_ns)
+    present: dict[int, set[int]] = {}
+    for f, track in zip(frame_of_row, tracks.track_id):
+        present.setdefault(int(track), set()).add(int(f))
+    out = {a: np.array([t if f in present.get(int(t), ()) else 0 for f, t in enumerate(ids)], dtype=np.int64)
+           for a, ids in held.items()}  # a track the camera no longer shows is not held
+    taken = np.zeros((len(tracks.frame_ns),), dtype=object)
+    for f in range(len(taken)):
+        taken[f] = {int(ids[f]) for ids in out.values() if ids[f]}
+    for agent, ids in out.items():
+        for f in range(len(ids) - 1, 0, -1):
+            track = int(ids[f])
+            if track and not ids[f - 1] and (f - 1) in present.get(track, ()) and track not in taken[f - 1]:
+                ids[f - 1] = track
+                taken[f - 1].add(track)
+    return out
+
+
+def _held_at(changes: list[tuple[int, str, int]], camera: str, frame_ns: np.ndarray) -> np.ndarray:
+    """The track id the agent held at each frame time (0: none)."""
+    mine = [(t, track) for t, cam, track in changes if cam == camera]
+    if not mine:
+        return np.zeros(len(frame_ns), dtype=np.int64)
+    times = np.array([t for t, _ in mine], dtype=np.int64)
+    tracks = np.array([track for _, track in mine], dtype=np.int64)
+    index = np.searchsorted(times, frame_ns, side="right") - 1
+    return np.where(index >= 0, tracks[np.maximum(index, 0)], 0)
+
+
+# -- the paper ----------------------------------------------------------------------------------
+
+
+def _people(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each agent's body IMU on the venue clock (offset from arrival stamps, as the hub does)."""
+    offsets: dict[str, int] = {}
+    for _, message in arrivals:
+        if message.DESCRIPTOR.name == "ImuBatch" and message.received_ns and len(message.sample_offset_ns):
+            delta = message.received_ns - message.timestamp_ns - message.sample_offset_ns[-1]
+            offsets[message.sensor_id] = min(offsets.get(message.sensor_id, delta), delta)
+    out = {}
+    for agent_id in agents:
+        sensor = _body_sensor(data.session.agent(agent_id))
+        series = data.imu.get(sensor.id)
+        if series is not None:
+            out[agent_id] = (series.time_ns + offsets.get(sensor.id, 0), series.accel_g)
+    return out
+
+
+def _paper(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str], notes: list[str]) -> IdentityRow:
+    people_imu = _people(data, arrivals, agents)
+    assignment: dict[str, dict[str, np.ndarray]] = {}
+    elapsed, tried, needed, stopped = 0.0, 0, 1, ""
+    for camera, tracks in data.cameras.items():
+        if tracks.person_id is None:
+            notes.append(f"{camera}: no truth labels; the paper's regression cannot be fitted and nothing is scored")
+            continue
+        verticals = {a: (tracks.frame_ns, vertical_acceleration(t, acc, tracks.frame_ns)) for a, (t, acc) in people_imu.items()}
+        model = _fit(tracks, verticals, notes, camera)
+        if model is None:
+            continue
+        started = time.perf_counter()
+        result = identify(tracks, verticals, model, PAPER_MAX_PERMUTATIONS)
+        elapsed += time.perf_counter() - started
+        tried, needed = result.permutations_tried, result.permutations_needed
+        stopped = result.reason
+        assignment[camera] = {a: ids for a, ids in result.assignment(tracks.frame_ns).items()}
+        notes.append(f"{camera}: the paper's regression r = {model.correlation:.2f} (the paper: 0.91), "
+                     f"slope {model.slope_g_per_mps:.3f} g per m/s, Ave {model.ave_abs_error_g:.3f} g, "
+                     f"SD {model.sd_abs_error_g:.3f} g")
+    row = _score("paper", data, agents, assignment)
+    update_ms = _paper_update_ms(data, people_imu)
+    row.update_ms_p99 = update_ms
+    row.note = (f"{tried} of {needed} permutations" + (f" (stopped: {stopped})" if stopped else "")
+                + f", whole session {elapsed:.1f} s")
+    return row
+
+
+def _fit(tracks: CameraTracks, verticals: dict[str, tuple[np.ndarray, np.ndarray]], notes: list[str],
+         camera: str) -> PaperModel | None:
+    speeds, values, ids = training_pairs(tracks, tracks.person_id, verticals, PaperModel(0, 0, 0, 0).window_s)
+    try:
+        return fit_model(speeds, values, ids)
+    except ValueError as error:
+        notes.append(f"{camera}: the paper's regression could not be fitted ({error})")
+        return None
+
+
+def _paper_update_ms(data: SessionData, people_imu: dict[str, tuple[np.ndarray, np.ndarray]]) -> float | None:
+    """One run of the paper's search over the last PAPER_WINDOW_S of the first camera; extrapolated to n!."""
+    camera, tracks = next(iter(sorted(data.cameras.items())))
+    if tracks.person_id is None or not people_imu:
+        return None
+    window = _tail(tracks, PAPER_WINDOW_S)
+    verticals = {a: (window.frame_ns, vertical_acceleration(t, acc, window.frame_ns)) for a, (t, acc) in people_imu.items()}
+    model = _fit(tracks, {a: (tracks.frame_ns, vertical_acceleration(t, acc, tracks.frame_ns))
+                          for a, (t, acc) in people_imu.items()}, [], camera)
+    if model is None:
+        return None
+    started = time.perf_counter()
+    result = identify(window, verticals, model, PAPER_MAX_PERMUTATIONS)
+    seconds = time.perf_counter() - started
+    return seconds * 1e3 * result.permutations_needed / max(result.permutations_tried, 1)
+
+
+def _tail(tracks: CameraTracks, seconds: float) -> CameraTracks:
+    start = tracks.frame_ns[-1] - int(seconds * 1e9)
+    rows = tracks.time_ns >= start
+    return CameraTracks(tracks.camera_id, tracks.frame_ns[tracks.frame_ns >= start], tracks.time_ns[rows],
+                        tracks.track_id[rows], tracks.x_m[rows], tracks.y_m[rows],
+                        None if tracks.height_m is None else tracks.height_m[rows], tracks.position_sd_m,
+                        None if tracks.person_id is None else tracks.person_id[rows])
+
+
+# -- scoring ------------------------------------------------------------------------------------
+
+
+def _score(method: str, data: SessionData, agents: list[str], assignment: dict[str, dict[str, np.ndarray]]) -> IdentityRow:
+    """Time correct and IDF1 of `assignment`: camera -> agent -> track id held at each frame."""
+    import motmetrics
+
+    correct = {a: 0 for a in agents}
+    visible = {a: 0 for a in agents}
+    accumulator = motmetrics.MOTAccumulator(auto_id=True)
+    number = {a: k + 1 for k, a in enumerate(agents)}
+    for camera, tracks in data.cameras.items():
+        if tracks.person_id is None or camera not in assignment:
+            continue
+        held = assignment[camera]
+        frame_of_row = np.searchsorted(tracks.frame_ns, tracks.time_ns)
+        starts = np.searchsorted(frame_of_row, np.arange(len(tracks.frame_ns)))
+        ends = np.searchsorted(frame_of_row, np.arange(len(tracks.frame_ns)), side="right")
+        truth_xy = {a: _truth_at(data, a, tracks.frame_ns) for a in agents}
+        for f in range(len(tracks.frame_ns)):
+            rows = range(starts[f], ends[f])
+            shown = {a: {int(tracks.track_id[r]) for r in rows if a in str(tracks.person_id[r]).split("+")} for a in agents}
+            where = {int(tracks.track_id[r]): (tracks.x_m[r], tracks.y_m[r]) for r in rows}
+            gt, hyp, hyp_xy = [], [], []
+            for a in agents:
+                track = int(held.get(a, np.zeros(0))[f]) if a in held and len(held[a]) > f else 0
+                if shown[a]:
+                    visible[a] += 1
+                    correct[a] += track in shown[a]
+                    gt.append(a)
+                if track in where:
+                    hyp.append(a)
+                    hyp_xy.append(where[track])
+            gt_xy = np.array([truth_xy[a][f] for a in gt]).reshape(-1, 2)
+            distances = motmetrics.distances.norm2squared_matrix(gt_xy, np.array(hyp_xy).reshape(-1, 2),
+                                                                 max_d2=IDF1_MATCH_M**2)
+            accumulator.update([number[a] for a in gt], [number[a] for a in hyp], distances)
+    seen = sum(visible.values())
+    per_agent = {a: 100.0 * correct[a] / visible[a] for a in agents if visible[a]}
+    idf1 = None
+    if seen:
+        summary = motmetrics.metrics.create().compute(accumulator, metrics=["idf1"], name=method)
+        idf1 = float(summary["idf1"].iloc[0])
+    return IdentityRow(method, len(agents), 100.0 * sum(correct.values()) / seen if seen else None, idf1, None,
+                       per_agent_pct=per_agent)
+
+
+def _truth_at(data: SessionData, agent_id: str, frame_ns: np.ndarray) -> np.ndarray:
+    truth = data.truth.get(agent_id)
+    if truth is None:
+        return np.full((len(frame_ns), 2), np.nan)
+    return np.column_stack([np.interp(frame_ns, truth.time_ns, truth.x_m), np.interp(frame_ns, truth.time_ns, truth.y_m)])
+
+
+# -- output -------------------------------------------------------------------------------------
+
+
+def _r(value: float | None, digits: int = 2) -> float | None:
+    return None if value is None or not math.isfinite(value) else round(value, digits)
+
+
+def to_json(report: IdentityReport) -> list[dict[str, Any]]:
+    return [{"method": row.method, "agents": row.agents, "time_correct_pct": _r(row.time_correct_pct),
+             "idf1": _r(row.idf1, 4), "update_ms_p99": _r(row.update_ms_p99, 3), "note": row.note,
+             "per_agent_pct": {a: _r(v) for a, v in row.per_agent_pct.items()}} for row in report.rows]
+
+
+def to_table(report: IdentityReport) -> str:
+    lines = [f"camera identity, cameras {', '.join(report.camera_ids)}",
+             f"{'method':8} {'agents':>6} {'time correct %':>15} {'IDF1':>6} {'update p99 ms':>14}  note"]
+    for row in report.rows:
+        pct = "-" if row.time_correct_pct is None else f"{row.time_correct_pct:.1f}"
+        idf1 = "-" if row.idf1 is None else f"{row.idf1:.3f}"
+        ms = "-" if row.update_ms_p99 is None else f"{row.update_ms_p99:.2f}"
+        lines.append(f"{row.method:8} {row.agents:>6} {pct:>15} {idf1:>6} {ms:>14}  {row.note}")
+    lines += [f"  {note}" for note in report.notes]
+    return "\n".join(lines)
