@@ -18,11 +18,32 @@ IMU_HZ = 100.0
 FPS = 20.0
 
 
-def session(people: list[str], length_m: float = 5.6, width_m: float = 3.0) -> Session:
-    agents = tuple(Agent(p, AgentKind.PEDESTRIAN, sensors=(Sensor(f"{p}-waist", Mount.WAIST, rate_hz=IMU_HZ,
-                                                                  forward_axis="+x", left_axis="+y"),))
+def session(people: list[str], length_m: float = 5.6, width_m: float = 3.0, chairs: bool = False) -> Session:
+    """Pedestrians with a waist sensor, or (chairs) wheelchairs with a seat sensor, named by `sensor_id`."""
+    kind, mount = (AgentKind.WHEELCHAIR, Mount.SEAT) if chairs else (AgentKind.PEDESTRIAN, Mount.WAIST)
+    agents = tuple(Agent(p, kind, sensors=(Sensor(sensor_id(p, chairs), mount, rate_hz=IMU_HZ, forward_axis="+x",
+                                                  left_axis="+y"),))
                    for p in people)
     return Session(Venue("room", length_m, width_m), agents)
+
+
+def sensor_id(person: str, chairs: bool = False) -> str:
+    return f"{person}-seat" if chairs else f"{person}-waist"
+
+
+def edge_poses(agent_id: str, times: np.ndarray, xy: np.ndarray, offset_m: tuple[float, float],
+               rate_hz: float = 25.0) -> list[tuple[int, object]]:
+    """(arrival_ns, EstimatedPose) as a chair's edge would publish them: the path shifted by a drift."""
+    velocity = np.gradient(xy, times, axis=0)
+    heading = np.arctan2(velocity[:, 1], velocity[:, 0])
+    out = []
+    for k in range(0, len(times), int(IMU_HZ / rate_hz)):
+        pose = messages.new("EstimatedPose", timestamp_ns=int(times[k] * S), agent_id=agent_id,
+                            x_m=float(xy[k, 0] + offset_m[0]), y_m=float(xy[k, 1] + offset_m[1]),
+                            heading_rad=float(heading[k]), covariance=[0.25, 0, 0, 0, 0.25, 0, 0, 0, 0.01],
+                            method="reckon", track=messages.Track.LIVE)
+        out.append((int(times[k] * S) + 25_000_000, pose))
+    return out
 
 
 def waypoints_path(points: list[tuple[float, float, float]], rate_hz: float = IMU_HZ) -> tuple[np.ndarray, np.ndarray]:
@@ -39,7 +60,7 @@ def waypoints_path(points: list[tuple[float, float, float]], rate_hz: float = IM
 
 
 def imu_batches(agent_id: str, times: np.ndarray, xy: np.ndarray, rng: np.random.Generator,
-                gait_g_per_mps: float = 0.18, clock_offset_s: float = 0.0) -> list[tuple[int, object]]:
+                gait_g_per_mps: float = 0.18, clock_offset_s: float = 0.0, chairs: bool = False) -> list[tuple[int, object]]:
     """(arrival_ns, ImuBatch) every 0.2 s for a waist sensor on this path."""
     velocity = np.gradient(xy, times, axis=0)
     speed = np.hypot(velocity[:, 0], velocity[:, 1])
@@ -56,7 +77,7 @@ def imu_batches(agent_id: str, times: np.ndarray, xy: np.ndarray, rng: np.random
     step = int(0.2 * IMU_HZ)
     for k, start in enumerate(range(0, len(times), step)):
         part = slice(start, start + step)
-        batch = messages.imu_batch(agent_id, f"{agent_id}-waist", k, device_ns[part], accel[part], gyro[part], None)
+        batch = messages.imu_batch(agent_id, sensor_id(agent_id, chairs), k, device_ns[part], accel[part], gyro[part], None)
         arrival = int(times[part][-1] * S) + 20_000_000
         batch.received_ns = arrival
         out.append((arrival, batch))

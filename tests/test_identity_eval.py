@@ -1,0 +1,33 @@
+"""`reckon eval`'s identity table on a crafted session log (tests/identity_scenes.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from identity_scenes import write_scene
+from protocol.session_log import read_session
+from reckon.evaluation.identity_eval import evaluate_identity, to_json, to_table
+from test_identity import CROSSING
+
+TRACKS = [(1, "a", 0, 6), (2, "b", 0, 6), (3, "c", 0, 30), (4, "b", 6, 30), (5, "a", 6, 14), (6, "", 10, 14),
+          (7, "a", 14.5, 30)]
+
+
+def test_identity_table_scores_both_methods_from_a_session_log(tmp_path: Path):
+    path = tmp_path / "crossing.mcap"
+    write_scene(path, CROSSING, TRACKS, end_s=30)
+    data = read_session(path)
+    assert set(data.cameras) == {"cam1"} and data.cameras["cam1"].person_id is not None
+    report = evaluate_identity(data, path)
+    by_method = to_json(report)
+    assert [row["method"] for row in by_method] == ["reckon", "reckon", "paper"]
+    live, refined, paper = by_method
+    for row in by_method:
+        assert row["agents"] == 3
+        assert 0.0 <= row["time_correct_pct"] <= 100.0 and 0.0 <= row["idf1"] <= 1.0
+        assert row["update_ms_p99"] > 0
+    # the live identity starts late (evidence first) and back-filling can only add correct time
+    assert live["time_correct_pct"] < refined["time_correct_pct"]
+    assert refined["time_correct_pct"] >= 95.0
+    assert paper["note"].startswith("6 of 6 permutations")
+    assert "time correct" in to_table(report)
