@@ -43,9 +43,9 @@ BIG = 1e6
 @dataclass(frozen=True)
 class IdentitySettings:
     hop_s: float = 0.5
-    delay_s: float = 1.0  # bins are scored this long after the camera saw them: the IMU has arrived by then
-    forget_per_s: float = 0.85  # evidence half-life about 4 s (algorithms.md: 0.9-0.97 per s with 2-4 s windows)
-    prior_bins: float = 8.0  # a new pair starts with this many bins at prior_cost
+    delay_s: float = 0.6  # bins are scored this long after the camera saw them: the IMU has arrived by then
+    forget_per_s: float = 0.7  # evidence half-life about 2 s: a tracker's swap is followed within seconds
+    prior_bins: float = 4.0  # a new pair starts with this many bins at prior_cost
     prior_cost: float = 2.0
     nobody_cost: float = 0.6  # each side; a pair is taken when its evidence is below twice this
     claim_margin: float = 0.3  # a new identity must be this much better than the best assignment without it
@@ -54,7 +54,7 @@ class IdentitySettings:
     fix_every_s: float = 1.0
     fix_cost: float = 0.6  # evidence needed to send a fix
     fix_after_s: float = 2.0  # ... held for this long
-    track_timeout_s: float = 1.5
+    track_timeout_s: float = 0.3  # a tracker reports every frame; one that comes back gets a new id anyway
     max_lag_s: float = 0.5
     lag_every_s: float = 5.0
     speed_sd_mps: float = 0.35
@@ -158,7 +158,8 @@ class IdentityEngine:
         if i is None:
             return
         cues = self.agents[i]
-        cues.push_pose(self.clocks.to_venue(cues.sensor_id, pose.timestamp_ns), pose.x_m, pose.y_m, pose.heading_rad)
+        cues.push_pose(self.clocks.to_venue(cues.sensor_id, pose.timestamp_ns), pose.x_m, pose.y_m, pose.heading_rad,
+                       pose.correction_sequence)
 
     def on_frame(self, frame: Any) -> list[Any]:
         camera = frame.camera_id

@@ -120,6 +120,7 @@ class AgentCues:
         self.ring = Ring(self.NAMES)
         self.last_bin = NO_BIN
         self.last_pose: tuple[int, float, float, float] | None = None
+        self.correction_sequence = 0
         self.samples = 0
 
     def push_imu(self, time_ns: np.ndarray, accel_g: np.ndarray, gyro_dps: np.ndarray) -> None:
@@ -146,8 +147,14 @@ class AgentCues:
             self.ring.put(int(bins[i]), activity=float(np.sqrt(max(power[i], 0.0))), heading=float(heading[i]))
         self.last_bin = int(bins[-1])
 
-    def push_pose(self, time_ns: int, x_m: float, y_m: float, heading_rad: float) -> None:
-        """A dead-reckoned pose (venue time): speed since the previous one, and the heading (unwrapped)."""
+    def push_pose(self, time_ns: int, x_m: float, y_m: float, heading_rad: float, correction_sequence: int = 0) -> None:
+        """A dead-reckoned pose (venue time): speed since the previous one, and the heading (unwrapped).
+
+        A pose that holds a new hub correction jumped there: it starts afresh rather than read the
+        jump as speed."""
+        if correction_sequence != self.correction_sequence:
+            self.correction_sequence = correction_sequence
+            self.last_pose = None
         if self.last_pose is not None:
             t0, x0, y0, h0 = self.last_pose
             dt = (time_ns - t0) * 1e-9

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Callable
 
 from protocol.errors import ReckonError
+from protocol.session import AgentKind
 
 log = logging.getLogger("reckon")
 
@@ -54,7 +55,8 @@ def run_sim(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
 
     params = params_with_overrides(_overrides(args.set))
     summary = simulate(args.players, args.duration, args.seed, Path(args.output), params,
-                       progress=lambda fraction: progress(f"simulating: {100 * fraction:.0f} %"))
+                       progress=lambda fraction: progress(f"simulating: {100 * fraction:.0f} %"),
+                       camera=getattr(args, "camera", False))
     print(summary)
     return 0
 
@@ -69,7 +71,26 @@ def run_sim_swim(args: argparse.Namespace, progress: Callable[[str], None]) -> i
     return 0
 
 
+def run_sim_room(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from sim_devices.room import params_with_overrides, simulate_room
+
+    params = params_with_overrides(_overrides(args.set))
+    summary = simulate_room(Path(args.output), seed=args.seed, people=args.people, duration_s=args.duration,
+                            params=params, camera=not args.no_camera,
+                            progress=lambda fraction: progress(f"simulating: {100 * fraction:.0f} %"))
+    print(summary)
+    return 0
+
+
 def run_import(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    if args.format == "tracks":
+        from reckon.importers.tracks_csv import import_tracks_csv
+
+        print(import_tracks_csv(Path(args.folder), Path(args.output),
+                                session_toml=Path(args.session) if args.session else None,
+                                into=Path(args.into) if args.into else None, camera_id=args.camera_id,
+                                fps=args.fps, start_s=args.start, position_sd_m=args.position_sd))
+        return 0
     if args.format == "csv":
         from reckon.importers.csv_folder import import_csv_folder
 
@@ -106,11 +127,23 @@ def run_eval(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
         swim = evaluate_swim(data, path, progress)
         print(json.dumps(swim_eval.to_json(swim), indent=1) if args.json else swim_eval.to_table(swim))
         return 0
-    report = evaluate_data(data, path, progress)
+    from reckon.evaluation import identity_eval
+
+    identity = identity_eval.evaluate_identity(data, path, progress) if identity_eval.has_cameras(data) else None
+    if identity is not None and args.identity_scaling:
+        identity.rows += identity_eval.scaling(progress=progress)
+    chairs = all(agent.kind is AgentKind.WHEELCHAIR for agent in data.session.agents)
+    report = evaluate_data(data, path, progress) if chairs or identity is None else None
     if args.json:
-        print(json.dumps(to_json(report), indent=1))
+        out = to_json(report) if report is not None else {"session": str(path)}
+        if identity is not None:
+            out["identity"] = identity_eval.to_json(identity)
+        print(json.dumps(out, indent=1))
     else:
-        print(to_table(report))
+        print("\n\n".join(part for part in (to_table(report) if report is not None else "",
+                                               identity_eval.to_table(identity) if identity is not None else "") if part))
+    if report is None:
+        return 0
     if args.plots:
         from reckon.evaluation.plots import write_plots
 
@@ -272,6 +305,9 @@ def build_parser() -> argparse.ArgumentParser:
     chairs.add_argument("-o", "--output", required=True)
     chairs.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a simulator parameter (docs/simulator.md)")
+    chairs.add_argument("--camera", action="store_true",
+                        help="add a simulated court tracker's anonymous tracks and their truth labels, two referees "
+                             "included (docs/simulator-camera.md)")
     chairs.set_defaults(run=run_sim)
     swim = sim_kind.add_parser("swim", help="swimmers and kickboards in a 25 x 18 m pool, straight and diagonal "
                                             "lengths (docs/simulator-swim.md)")
@@ -282,11 +318,22 @@ def build_parser() -> argparse.ArgumentParser:
     swim.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                       help="override a simulator figure (docs/simulator-swim.md)")
     swim.set_defaults(run=run_sim_swim)
+    room = sim_kind.add_parser("room", help="the camera-identity paper's room: people walking with a waist sensor, "
+                                            "seen by a stereo head tracker (docs/simulator-room.md)")
+    room.add_argument("--seed", type=int, default=1)
+    room.add_argument("--people", type=int, default=3, help="wearers (the paper: 3); the room grows with them")
+    room.add_argument("--duration", type=float, default=120.0, help="seconds")
+    room.add_argument("--no-camera", action="store_true", help="leave the tracker's frames out")
+    room.add_argument("-o", "--output", required=True)
+    room.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                      help="override a simulator figure (docs/simulator-room.md)")
+    room.set_defaults(run=run_sim_room)
 
     imp = sub.add_parser("import", help="convert recorded logs into a session log")
-    imp.add_argument("format", choices=["csv", "ngimu", "tsnd"],
-                     help="csv: docs/csv-import.md; ngimu: x-io NGIMU folders; tsnd: an ATR TSND121/151 CSV log")
-    imp.add_argument("folder", metavar="PATH", help="the folder (csv, ngimu) or the CSV file (tsnd)")
+    imp.add_argument("format", choices=["csv", "ngimu", "tsnd", "tracks"],
+                     help="csv: docs/csv-import.md; ngimu: x-io NGIMU folders; tsnd: an ATR TSND121/151 CSV log; "
+                          "tracks: a camera tracker's tracks, MOTChallenge-style CSV")
+    imp.add_argument("folder", metavar="PATH", help="the folder (csv, ngimu) or the CSV file (tsnd, tracks)")
     imp.add_argument("-o", "--output", required=True)
     ngimu = imp.add_argument_group("ngimu and tsnd options")
     ngimu.add_argument("--wheel-diameter-m", type=float, default=0.62, help="wheel diameter (default 0.62 m)")
@@ -297,12 +344,24 @@ def build_parser() -> argparse.ArgumentParser:
                        help="device folder, serial or sensor id = seat|left_wheel|right_wheel (default: from names)")
     ngimu.add_argument("--spin-axis", action="append", default=[], type=_key_value, metavar="WHEEL=AXIS",
                        help="e.g. left_wheel=+y (default: found from the data, assuming mostly forward pushing)")
+    tracks = imp.add_argument_group("tracks options (docs/csv-import.md, camera tracks)")
+    tracks.add_argument("--session", metavar="SESSION.toml", help="the session description for a new log")
+    tracks.add_argument("--into", metavar="LOG.mcap",
+                        help="or: an existing session log; -o gets its messages plus the tracks (-o may be LOG)")
+    tracks.add_argument("--camera-id", default="cam1", help="camera id (default cam1)")
+    tracks.add_argument("--fps", type=float, help="frame rate, when the file has no time column")
+    tracks.add_argument("--start", metavar="UNIX_S", help="time of frame 1 in seconds, when the file has no time column")
+    tracks.add_argument("--position-sd", type=float, metavar="M",
+                        help="the tracker's 1-sigma position error per axis (default 0.1 m, with a warning)")
     imp.set_defaults(run=run_import)
 
     ev = sub.add_parser("eval", help="run the estimators over a session and score them against truth")
     ev.add_argument("session")
     ev.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     ev.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR")
+    ev.add_argument("--identity-scaling", action="store_true",
+                    help="with camera tracks: also time both identity methods at 3, 6, 10, 20 and 50 wearers "
+                         "(simulated rooms, about 2 min)")
     ev.set_defaults(run=run_eval)
 
     def bus_options(command: argparse.ArgumentParser) -> None:

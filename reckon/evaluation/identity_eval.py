@@ -178,8 +178,8 @@ def _paper(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]
     row = _score("paper", data, agents, assignment)
     update_ms = _paper_update_ms(data, people_imu)
     row.update_ms_p99 = update_ms
-    row.note = (f"{tried} of {needed} permutations" + (f" (stopped: {stopped})" if stopped else "")
-                + f", whole session {elapsed:.1f} s")
+    row.note = (f"{tried} of {needed:.3g} permutations" + (" (stopped at the budget)" if stopped else "")
+                + f", whole session {elapsed:.1f} s" + (", update time extrapolated to n!" if stopped else ""))
     return row
 
 
@@ -292,7 +292,29 @@ def to_table(report: IdentityReport) -> str:
     for row in report.rows:
         pct = "-" if row.time_correct_pct is None else f"{row.time_correct_pct:.1f}"
         idf1 = "-" if row.idf1 is None else f"{row.idf1:.3f}"
-        ms = "-" if row.update_ms_p99 is None else f"{row.update_ms_p99:.2f}"
+        ms = "-" if row.update_ms_p99 is None else f"{row.update_ms_p99:.3g}"
         lines.append(f"{row.method:8} {row.agents:>6} {pct:>15} {idf1:>6} {ms:>14}  {row.note}")
     lines += [f"  {note}" for note in report.notes]
     return "\n".join(lines)
+
+
+SCALING_AGENTS = (3, 6, 10, 20, 50)
+
+
+def scaling(seed: int = 1, duration_s: float = 30.0, progress: Callable[[str], None] = lambda _: None,
+            folder: Path | None = None) -> list[IdentityRow]:
+    """Time per update as agents grow: the room simulator at 3 ... 50 wearers, ours and the paper's."""
+    import tempfile
+
+    from protocol.session_log import read_session
+    from sim_devices.room import simulate_room
+
+    rows = []
+    with tempfile.TemporaryDirectory() as scratch:
+        for people in SCALING_AGENTS:
+            path = Path(folder or scratch) / f"room-{people}.mcap"
+            progress(f"scaling: {people} wearers, simulating {duration_s:.0f} s")
+            simulate_room(path, seed=seed, people=people, duration_s=duration_s)
+            report = evaluate_identity(read_session(path), path, progress)
+            rows += [row for row in report.rows if not row.note.startswith("refined")]
+    return rows

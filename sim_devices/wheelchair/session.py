@@ -6,7 +6,9 @@ Streams, each in non-decreasing log time, merged into one file in log-time order
   sample + latency, kept in order as an in-order BLE link delivers them;
 - BeaconSighting per heard advertisement (receiver = seat sensor, its clock), same latency model;
 - TruthPose per agent at TRUTH_HZ and TruthContact per contact (one message, under the agent
-  with the smaller id), in true time.
+  with the smaller id), in true time;
+- with `camera`: CameraFrame and TruthTrackLabel per tracker frame (sim_devices.camera), log time
+  = the frame's stamp in the tracker's clock.
 Determinism: every random draw comes from `numpy.random.SeedSequence(seed)` children in a fixed
 order, and no wall-clock time enters the file (`clock.start_unix_s` is the epoch).
 """
@@ -17,7 +19,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -25,6 +27,7 @@ from protocol import keys, messages
 from protocol.errors import ConfigError
 from protocol.session import Agent, Beacon, Mount, Sensor, Session, Venue
 from protocol.messages import imu_batch
+from sim_devices.camera import COURT, SEATED_HEAD_HEIGHT_M, PersonPath, camera_items, extra_people, simulate_tracks
 from sim_devices.common import Item, write_merged
 from sim_devices.wheelchair.devices import ImuStream, build_chairs, chair_streams, sensor_ids
 from sim_devices.wheelchair.impacts import Impact, contact_impacts, jolt_impacts
@@ -65,9 +68,12 @@ class SimSummary:
     max_speed_mps: float
     path_length_m: dict[str, float]
     skid_m: dict[str, float]  # displacement without wheel rotation (shoves, push-apart)
+    camera: dict[str, int] | None = None  # the simulated tracker's counters (--camera), else None
 
     def __str__(self) -> str:
         paths = list(self.path_length_m.values())
+        camera = [] if self.camera is None else [
+            "  camera: " + ", ".join(f"{value} {name.replace('_', ' ')}" for name, value in self.camera.items())]
         return "\n".join([
             f"{self.output}: {self.players} chairs, {self.duration_s:.1f} s, seed {self.seed}",
             f"  IMU: {self.imu_samples_written} of {self.imu_samples} samples in {self.imu_batches_written} batches "
@@ -77,20 +83,23 @@ class SimSummary:
             f"from contacts, {self.jolts} other",
             f"  beacon sightings: {self.sightings}; truth poses: {self.truth_poses}",
             f"  path per chair: {min(paths):.0f}-{max(paths):.0f} m; top speed {self.max_speed_mps:.2f} m/s; "
-            f"moved without wheel rotation: up to {max(self.skid_m.values()):.2f} m"])
+            f"moved without wheel rotation: up to {max(self.skid_m.values()):.2f} m", *camera])
 
 
 def simulate(players: int, duration_s: float, seed: int, output: Path, params: SimParams | None = None,
-             progress: Callable[[float], None] | None = None) -> SimSummary:
+             progress: Callable[[float], None] | None = None, camera: bool = False) -> SimSummary:
     """Simulate a wheelchair-basketball game and write its session log to `output`.
 
     ConfigError for a bad player count, duration or seed, or an output that cannot be written.
-    `progress`, if given, is called with the completed share in [0, 1].
+    `progress`, if given, is called with the completed share in [0, 1]. `camera` adds a simulated
+    court tracker's anonymous tracks and their truth labels (sim_devices.camera, COURT preset, two
+    referees); its draws come from a seed of their own, so the other streams are the same either way.
     """
     params = params or SimParams()
     _check(players, duration_s, seed)
     report = _throttled(progress)
-    motion_seed, chair_seed, device_seed, radio_seed, impact_seed = np.random.SeedSequence(seed).spawn(5)
+    root_seed = np.random.SeedSequence(seed)
+    motion_seed, chair_seed, device_seed, radio_seed, impact_seed = root_seed.spawn(5)
     motion = simulate_motion(players, duration_s, params, np.random.default_rng(motion_seed),
                              lambda share: report(MOTION_SHARE * share))
     builds = build_chairs(players, params, np.random.default_rng(chair_seed))
@@ -102,16 +111,21 @@ def simulate(players: int, duration_s: float, seed: int, output: Path, params: S
     streams = [s for i, b in enumerate(builds)
                for s in chair_streams(motion, i, b, field, impacts[i], params, agent_seeds[i])]
     session = _describe(builds, motion, streams, params, seed, duration_s)
+    camera_sources, camera_about = ([], None) if not camera else \
+        _camera_items(motion, builds, params, root_seed.spawn(1)[0])
+    if camera_about is not None:
+        session = dataclasses.replace(session, source={**session.source, "camera": camera_about})
     counts = {"imu_samples_written": 0, "imu_batches_written": 0, "lost_batches": 0, "sightings": 0}
     sources = [_imu_items(s, motion, params, radio_rng, counts) for s in streams]
     sources += [_sighting_items(motion, i, s, beacons, params, radio_rng, counts)
                 for i, s in enumerate(streams[2::3])]
-    sources += [_truth_items(motion, builds, params), _contact_items(motion, builds, params)]
+    sources += [_truth_items(motion, builds, params), _contact_items(motion, builds, params), *camera_sources]
     total = len(motion.time_s) * len(streams) / params.sensors.batch_samples + 1.0
     write_merged(output, session, sources,
            lambda written: report(MOTION_SHARE + (1.0 - MOTION_SHARE) * min(written / total, 0.99)))
     report(1.0)
-    return _summary(output, players, duration_s, seed, motion, builds, streams, impacts, counts, params)
+    summary = _summary(output, players, duration_s, seed, motion, builds, streams, impacts, counts, params)
+    return dataclasses.replace(summary, camera=camera_about["counters"]) if camera_about else summary
 
 
 def _throttled(progress: Callable[[float], None] | None) -> Callable[[float], None]:
@@ -248,6 +262,22 @@ def _contact_items(motion: Motion, builds: list[ChairBuild], params: SimParams) 
         yield stamp, 3, keys.contact(VENUE, first), messages.new(
             "TruthContact", timestamp_ns=stamp, agent_id=first, other_agent_id=second, kind=contact.kind,
             closing_speed_mps=contact.closing_mps)
+
+
+def _camera_items(motion: Motion, builds: list[ChairBuild], params: SimParams,
+                  seed: np.random.SeedSequence) -> tuple[list[Iterator[Item]], dict[str, Any]]:
+    """The court tracker over every chair (truth at TRUTH_HZ, seated head height) and two referees."""
+    rng = np.random.default_rng(seed)
+    steps = np.arange(0, len(motion.time_s), max(1, int(round(params.sensors.rate_hz / TRUTH_HZ))))
+    stamps = _true_ns(motion.time_s[steps], params)
+    area = (params.court.length_m, params.court.width_m)
+    people = [PersonPath(b.agent_id, stamps, motion.x_m[steps, i], motion.y_m[steps, i], SEATED_HEAD_HEIGHT_M)
+              for i, b in enumerate(builds)]
+    people += extra_people(COURT.extras.count, area, int(stamps[0]), int(stamps[-1]), rng, COURT.extras, "referee")
+    recording = simulate_tracks(people, area, COURT, rng)
+    about = {"camera_id": recording.camera_id, "preset": "court", "clock_offset_s": COURT.camera.clock_offset_ms / 1e3,
+             "extra_people": [p.person_id for p in people[len(builds):]], "counters": recording.counters}
+    return [camera_items(recording, VENUE)], about
 
 
 def _true_ns(true_s: np.ndarray, params: SimParams) -> np.ndarray:
