@@ -60,6 +60,29 @@ def with_overrides(params: P, overrides: dict[str, str]) -> P:
                                           for group, values in changes.items()})
 
 
+MAX_BATCH_SPAN_S = 4.0  # ImuBatch sample offsets are uint32 ns: at most 4.29 s
+
+
+def check_pairs_and_batches(params: Any) -> None:
+    """ConfigError when a `*_min`/`*_max` pair of a group is reversed, or (with a `sensors` group
+    of `batch_samples` at `rate_hz`) when an ImuBatch would span more than MAX_BATCH_SPAN_S."""
+    for group in dataclasses.fields(params):
+        values = getattr(params, group.name)
+        names = [f.name for f in dataclasses.fields(values)]
+        for name in names:
+            if "_min" in name:
+                partner = name.replace("_min", "_max", 1)
+                if partner in names and getattr(values, name) > getattr(values, partner):
+                    raise ConfigError(f"--set: {group.name}.{name} = {getattr(values, name)} exceeds "
+                                      f"{group.name}.{partner} = {getattr(values, partner)}")
+    sensors = getattr(params, "sensors", None)
+    if sensors is not None and hasattr(sensors, "batch_samples"):
+        span_s = sensors.batch_samples / sensors.rate_hz
+        if span_s > MAX_BATCH_SPAN_S:
+            raise ConfigError(f"--set: sensors.batch_samples / sensors.rate_hz = {span_s:g} s exceeds "
+                              f"{MAX_BATCH_SPAN_S} s (an ImuBatch's uint32 sample offsets)")
+
+
 def _parse(key: str, text: str, spec: dataclasses.Field[Any]) -> float | int:
     low, high = spec.metadata["low"], spec.metadata["high"]
     integer = isinstance(spec.default, int) and not isinstance(spec.default, bool)

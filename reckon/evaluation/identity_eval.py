@@ -29,7 +29,7 @@ from hub.chair_hub import HubSettings
 from hub.track_paper import identify
 from hub.track_paper_fragments import training_pairs
 from hub.track_paper_features import PaperModel, fit_model, vertical_acceleration
-from protocol.session import AgentKind, Mount
+from protocol.session import Mount
 from protocol.session_log import CameraTracks, SessionData
 from reckon.evaluation.reckon_run import log_inputs, run_lockstep
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from protocol.errors import ConfigError
-from sim_devices.param_table import param, rows, with_overrides, zeroed
+from sim_devices.param_table import check_pairs_and_batches, param, rows, with_overrides, zeroed
 
 _p = param
 
@@ -277,27 +277,12 @@ def params_with_overrides(overrides: dict[str, str], base: RoomParams | None = N
     return result
 
 
-MAX_BATCH_SPAN_S = 4.0  # ImuBatch sample offsets are uint32 ns: at most 4.29 s
-
-
 def check(params: RoomParams) -> None:
     """ConfigError when a [min, max] pair is reversed, no activity has weight, or a batch spans > 4 s."""
-    for group in dataclasses.fields(params):
-        values = getattr(params, group.name)
-        names = [f.name for f in dataclasses.fields(values)]
-        for name in names:
-            if "_min" in name:
-                partner = name.replace("_min", "_max", 1)
-                if partner in names and getattr(values, name) > getattr(values, partner):
-                    raise ConfigError(f"--set: {group.name}.{name} = {getattr(values, name)} exceeds "
-                                      f"{group.name}.{partner} = {getattr(values, partner)}")
+    check_pairs_and_batches(params)
     weights = [getattr(params.activity, f.name) for f in dataclasses.fields(params.activity) if f.name.endswith("_weight")]
     if sum(weights) <= 0:
         raise ConfigError("--set: activity.*_weight are all zero (nobody would do anything)")
     if 2.0 * params.room.wall_margin_m >= params.room.width_m:
         raise ConfigError(f"--set: room.wall_margin_m = {params.room.wall_margin_m} leaves no floor in a "
                           f"{params.room.width_m} m wide room")
-    span_s = params.sensors.batch_samples / params.sensors.rate_hz
-    if span_s > MAX_BATCH_SPAN_S:
-        raise ConfigError(f"--set: sensors.batch_samples / sensors.rate_hz = {span_s:g} s exceeds "
-                          f"{MAX_BATCH_SPAN_S} s (an ImuBatch's uint32 sample offsets)")

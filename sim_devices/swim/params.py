@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from protocol.errors import ConfigError
-from sim_devices.param_table import param, rows, with_overrides, zeroed
+from sim_devices.param_table import check_pairs_and_batches, param, rows, with_overrides, zeroed
 
 STROKES = ("crawl", "breaststroke", "backstroke", "butterfly", "kick")
 
@@ -380,21 +380,6 @@ def params_with_overrides(overrides: dict[str, str], base: SwimParams | None = N
     return result
 
 
-MAX_BATCH_SPAN_S = 4.0  # ImuBatch sample offsets are uint32 ns: at most 4.29 s
-
-
 def check(params: SwimParams) -> None:
     """ConfigError when a [min, max] pair is reversed or a batch would span more than 4 s."""
-    for group in dataclasses.fields(params):
-        values = getattr(params, group.name)
-        names = [f.name for f in dataclasses.fields(values)]
-        for name in names:
-            if "_min" in name:
-                partner = name.replace("_min", "_max", 1)
-                if partner in names and getattr(values, name) > getattr(values, partner):
-                    raise ConfigError(f"--set: {group.name}.{name} = {getattr(values, name)} exceeds "
-                                      f"{group.name}.{partner} = {getattr(values, partner)}")
-    span_s = params.sensors.batch_samples / params.sensors.rate_hz
-    if span_s > MAX_BATCH_SPAN_S:
-        raise ConfigError(f"--set: sensors.batch_samples / sensors.rate_hz = {span_s:g} s exceeds "
-                          f"{MAX_BATCH_SPAN_S} s (an ImuBatch's uint32 sample offsets)")
+    check_pairs_and_batches(params)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from protocol.errors import ConfigError
-from sim_devices.param_table import param, rows, with_overrides, zeroed
+from sim_devices.param_table import check_pairs_and_batches, param, rows, with_overrides, zeroed
 
 
 _p = param
@@ -264,20 +264,7 @@ def params_with_overrides(overrides: dict[str, str], base: SimParams | None = No
     return result
 
 
-MAX_BATCH_SPAN_S = 4.0  # ImuBatch sample offsets are uint32 ns: at most 4.29 s
-
-_PAIRS = (("chair", "camber_min_deg", "camber_max_deg"), ("chair", "top_speed_min_mps", "top_speed_max_mps"),
-          ("game", "possession_min_s", "possession_max_s"), ("game", "stoppage_min_s", "stoppage_max_s"),
-          ("game", "spot_change_min_s", "spot_change_max_s"), ("game", "arrive_m", "leave_m"))
-
-
 def _check_pairs(params: SimParams) -> None:
-    for group, low_name, high_name in _PAIRS:
-        values = getattr(params, group)
-        if getattr(values, low_name) > getattr(values, high_name):
-            raise ConfigError(f"--set: {group}.{low_name} = {getattr(values, low_name)} exceeds "
-                              f"{group}.{high_name} = {getattr(values, high_name)}")
-    span_s = params.sensors.batch_samples / params.sensors.rate_hz
-    if span_s > MAX_BATCH_SPAN_S:
-        raise ConfigError(f"--set: sensors.batch_samples / sensors.rate_hz = {span_s:g} s exceeds "
-                          f"{MAX_BATCH_SPAN_S} s (an ImuBatch's uint32 sample offsets)")
+    check_pairs_and_batches(params)  # every *_min <= *_max, and the batch span
+    if params.game.arrive_m > params.game.leave_m:
+        raise ConfigError(f"--set: game.arrive_m = {params.game.arrive_m} exceeds game.leave_m = {params.game.leave_m}")
