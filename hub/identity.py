@@ -125,7 +125,6 @@ class IdentityEngine:
         self.speed_model = SpeedModel()
         self.tracks: dict[tuple[str, int], _Track] = {}
         self.scored_until: dict[str, int] = {}  # camera -> first bin not yet scored
-        self.newest_bin: dict[str, int] = {}
         self.next_lag_bin: dict[str, int] = {}
         self.lag_bins: dict[str, int] = {}
         self.counters = IdentityCounters()
@@ -175,7 +174,6 @@ class IdentityEngine:
                 self.counters.tracks += 1
             track.cues.push(time_ns, float(x), float(y))
         bin_now = time_ns // BIN_NS
-        self.newest_bin[camera] = max(self.newest_bin.get(camera, bin_now), bin_now)
         first = self.scored_until.setdefault(camera, bin_now)
         end = bin_now - int(round(self.settings.delay_s / BIN_S))
         if end - first < int(round(self.settings.hop_s / BIN_S)):

@@ -42,14 +42,12 @@ class Ring:
         self.capacity = capacity
         self.bins = np.full(capacity, NO_BIN, dtype=np.int64)
         self.values = {name: np.full(capacity, np.nan) for name in names}
-        self.newest = NO_BIN
 
     def put(self, bin_number: int, **values: float) -> None:
         slot = bin_number % self.capacity
         self.bins[slot] = bin_number
         for name, value in values.items():
             self.values[name][slot] = value
-        self.newest = max(self.newest, bin_number)
 
     def window(self, name: str, first_bin: int, count: int) -> np.ndarray:
         """Values of bins first_bin .. first_bin + count - 1; NaN where a bin is missing."""
@@ -75,7 +73,7 @@ class SpeedModel:
     floor_g: float = 0.03
     prior_weight: float = 50.0  # the prior counts as this many bins of evidence
     forget_per_bin: float = 0.999
-    _sums: np.ndarray = field(default_factory=lambda: np.zeros(5))  # n, sa, ss, saa, sas
+    _sums: np.ndarray = field(init=False)  # n, sa, ss, saa, sas: the prior, then forgetting sums
 
     def __post_init__(self) -> None:
         self._sums = self._prior()
@@ -118,10 +116,8 @@ class AgentCues:
         self.heading_deg = 0.0
         self.state: dict[str, np.ndarray] | None = None
         self.ring = Ring(self.NAMES)
-        self.last_bin = NO_BIN
         self.last_pose: tuple[int, float, float, float] | None = None
         self.correction_sequence = 0
-        self.samples = 0
 
     def push_imu(self, time_ns: np.ndarray, accel_g: np.ndarray, gyro_dps: np.ndarray) -> None:
         """Samples in venue time, in order; bins that end inside the batch get their values."""
@@ -130,7 +126,6 @@ class AgentCues:
         if self.state is None:
             settled = np.asarray(accel_g[0]) * (1.0 - self.filters["gravity"][0][0])  # as if it had always read this
             self.state = {"gravity": settled.reshape(1, 3), "activity": np.zeros(1)}
-        self.samples += len(time_ns)
         b, a = self.filters["gravity"]
         gravity, zi = lfilter(b, a, accel_g, axis=0, zi=self.state["gravity"])
         self.state["gravity"] = zi
@@ -145,7 +140,6 @@ class AgentCues:
         ends = np.flatnonzero(np.diff(np.append(bins, bins[-1] + 1)) != 0)  # last sample of each bin
         for i in ends:
             self.ring.put(int(bins[i]), activity=float(np.sqrt(max(power[i], 0.0))), heading=float(heading[i]))
-        self.last_bin = int(bins[-1])
 
     def push_pose(self, time_ns: int, x_m: float, y_m: float, heading_rad: float, correction_sequence: int = 0) -> None:
         """A dead-reckoned pose (venue time): speed since the previous one, and the heading (unwrapped).
@@ -186,19 +180,15 @@ class TrackCues:
         self.xy = np.zeros((size, 2))
         self.count = 0
         self.ring = Ring(self.NAMES)
-        self.first_ns = self.last_ns = 0
-        self.frames = 0
+        self.last_ns = 0
 
     @property
     def latest_xy(self) -> np.ndarray:
         return self.xy[(self.count - 1) % len(self.times)]
 
     def push(self, time_ns: int, x_m: float, y_m: float) -> None:
-        if self.frames == 0:
-            self.first_ns = time_ns
-        elif time_ns <= self.last_ns:
-            return
-        self.frames += 1
+        if self.count and time_ns <= self.last_ns:
+            return  # a repeated or out-of-order frame
         self.last_ns = time_ns
         slot = self.count % len(self.times)
         self.times[slot], self.xy[slot] = time_ns * 1e-9, (x_m, y_m)

@@ -26,6 +26,7 @@ from typing import Any, Callable
 import numpy as np
 
 from hub.chair_hub import HubSettings
+from hub.clocks import ClockOffsets
 from hub.track_paper import identify
 from hub.track_paper_fragments import training_pairs
 from hub.track_paper_features import PaperModel, fit_model, vertical_acceleration
@@ -36,6 +37,7 @@ from reckon.evaluation.reckon_run import log_inputs, run_lockstep
 IDF1_MATCH_M = 1.0
 PAPER_MAX_PERMUTATIONS = 5040  # 7!: about a minute at 10 people; beyond it the search is extrapolated
 PAPER_WINDOW_S = 10.0
+WHOLE_SESSION_S = 1e7  # clock offsets: the lower envelope over the whole log (offline, no drift to follow)
 
 
 @dataclass
@@ -140,17 +142,16 @@ def _held_at(changes: list[tuple[int, str, int]], camera: str, frame_ns: np.ndar
 
 def _people(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Each agent's body IMU on the venue clock (offset from arrival stamps, as the hub does)."""
-    offsets: dict[str, int] = {}
+    clocks = ClockOffsets(window_s=WHOLE_SESSION_S)
     for _, message in arrivals:
-        if message.DESCRIPTOR.name == "ImuBatch" and message.received_ns and len(message.sample_offset_ns):
-            delta = message.received_ns - message.timestamp_ns - message.sample_offset_ns[-1]
-            offsets[message.sensor_id] = min(offsets.get(message.sensor_id, delta), delta)
+        if message.DESCRIPTOR.name == "ImuBatch" and len(message.sample_offset_ns):
+            clocks.observe(message.sensor_id, message.timestamp_ns + message.sample_offset_ns[-1], message.received_ns)
     out = {}
     for agent_id in agents:
         sensor = _body_sensor(data.session.agent(agent_id))
         series = data.imu.get(sensor.id)
         if series is not None:
-            out[agent_id] = (series.time_ns + offsets.get(sensor.id, 0), series.accel_g)
+            out[agent_id] = (series.time_ns + clocks.offset_ns(sensor.id), series.accel_g)
     return out
 
 
@@ -158,6 +159,7 @@ def _paper(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]
     people_imu = _people(data, arrivals, agents)
     assignment: dict[str, dict[str, np.ndarray]] = {}
     elapsed, tried, needed, stopped = 0.0, 0, 1, ""
+    models: dict[str, PaperModel] = {}
     for camera, tracks in data.cameras.items():
         if tracks.person_id is None:
             notes.append(f"{camera}: no truth labels; the paper's regression cannot be fitted and nothing is scored")
@@ -166,6 +168,7 @@ def _paper(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]
         model = _fit(tracks, verticals, notes, camera)
         if model is None:
             continue
+        models[camera] = model
         started = time.perf_counter()
         result = identify(tracks, verticals, model, PAPER_MAX_PERMUTATIONS)
         elapsed += time.perf_counter() - started
@@ -176,8 +179,7 @@ def _paper(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]
                      f"slope {model.slope_g_per_mps:.3f} g per m/s, Ave {model.ave_abs_error_g:.3f} g, "
                      f"SD {model.sd_abs_error_g:.3f} g")
     row = _score("paper", data, agents, assignment)
-    update_ms = _paper_update_ms(data, people_imu)
-    row.update_ms_p99 = update_ms
+    row.update_ms_p99 = _paper_update_ms(data, people_imu, models)
     row.note = (f"{tried} of {needed:.3g} permutations" + (" (stopped at the budget)" if stopped else "")
                 + f", whole session {elapsed:.1f} s" + (", update time extrapolated to n!" if stopped else ""))
     return row
@@ -193,19 +195,16 @@ def _fit(tracks: CameraTracks, verticals: dict[str, tuple[np.ndarray, np.ndarray
         return None
 
 
-def _paper_update_ms(data: SessionData, people_imu: dict[str, tuple[np.ndarray, np.ndarray]]) -> float | None:
+def _paper_update_ms(data: SessionData, people_imu: dict[str, tuple[np.ndarray, np.ndarray]],
+                     models: dict[str, PaperModel]) -> float | None:
     """One run of the paper's search over the last PAPER_WINDOW_S of the first camera; extrapolated to n!."""
     camera, tracks = next(iter(sorted(data.cameras.items())))
-    if tracks.person_id is None or not people_imu:
+    if camera not in models or not people_imu:
         return None
     window = _tail(tracks, PAPER_WINDOW_S)
     verticals = {a: (window.frame_ns, vertical_acceleration(t, acc, window.frame_ns)) for a, (t, acc) in people_imu.items()}
-    model = _fit(tracks, {a: (tracks.frame_ns, vertical_acceleration(t, acc, tracks.frame_ns))
-                          for a, (t, acc) in people_imu.items()}, [], camera)
-    if model is None:
-        return None
     started = time.perf_counter()
-    result = identify(window, verticals, model, PAPER_MAX_PERMUTATIONS)
+    result = identify(window, verticals, models[camera], PAPER_MAX_PERMUTATIONS)
     seconds = time.perf_counter() - started
     return seconds * 1e3 * result.permutations_needed / max(result.permutations_tried, 1)
 
