@@ -46,6 +46,11 @@ def length(venue: str, agent: str) -> str:
     return f"{ROOT}/{venue}/{agent}/length"
 
 
+def scan(venue: str, agent: str) -> str:
+    """QR calibration stand scans of a pedestrian's phone (StandScan), from the edge."""
+    return f"{ROOT}/{venue}/{agent}/event/scan"
+
+
 def pose(venue: str, agent: str, track: str = "live") -> str:
     return f"{ROOT}/{venue}/{agent}/pose/{track}"
 

@@ -221,6 +221,24 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("method", "string", False),
         ("score", "float", False),  # the assignment's evidence margin over the next best (>= 0)
     ],
+    # A phone scanned a QR calibration stand (device clock). The edge checks the code's integrity
+    # against the venue's key before it trusts it; `accepted` false keeps a refused scan in the
+    # record with the reason (forged, another venue's, unknown stand). The pose is the stand's.
+    "StandScan": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("sensor_id", "string", False),
+        ("stand_id", "string", False),
+        ("x_m", "double", False),
+        ("y_m", "double", False),
+        ("floor", "int64", False),
+        ("heading_rad", "double", False),  # the stand's facing, counter-clockwise from +x
+        ("tilt_rad", "double", False),
+        ("payload", "string", False),  # the code's text as scanned
+        ("accepted", "bool", False),
+        ("reason", "string", False),  # why it was refused; empty when accepted
+    ],
     "TruthContact": [
         ("schema_version", "uint32", False),
         ("timestamp_ns", "int64", False),
@@ -269,6 +287,7 @@ TruthLength = CLASSES["TruthLength"]
 CameraFrame = CLASSES["CameraFrame"]
 TruthTrackLabel = CLASSES["TruthTrackLabel"]
 TrackIdentity = CLASSES["TrackIdentity"]
+StandScan = CLASSES["StandScan"]
 
 
 def new(name: str, **fields: Any) -> Any:

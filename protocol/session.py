@@ -40,6 +40,9 @@ class Mount(str, enum.Enum):
     BACK = "back"
     HEAD = "head"
     KICKBOARD = "kickboard"
+    # A phone: held flat in front (the indoor-navigation paper's hold) or in a trouser pocket.
+    HAND = "hand"
+    POCKET = "pocket"
 
     @property
     def on_wheel(self) -> bool:
@@ -85,11 +88,43 @@ class Beacon:
 
 
 @dataclass(frozen=True)
+class Stand:
+    """A QR calibration stand (the indoor-navigation paper's): a phone placed in its corner is at
+    (x, y) on `floor`, facing `heading_deg` (counter-clockwise from +x), tilted `tilt_deg` up."""
+
+    id: str
+    x_m: float
+    y_m: float
+    floor: int = 0
+    heading_deg: float = 0.0
+    tilt_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class MapPoint:
+    """A corridor junction of the paper's map (its tables 4-5): where corridors meet, and the
+    directions (deg, counter-clockwise from +x) in which a corridor leaves it."""
+
+    id: str
+    x_m: float
+    y_m: float
+    directions_deg: tuple[float, ...]
+    floor: int = 0
+
+
+@dataclass(frozen=True)
 class Venue:
     name: str
     court_length_m: float = 28.0  # FIBA / IWBF court; for a pool, the lane length (wall to wall, along x)
     court_width_m: float = 15.0
     beacons: tuple[Beacon, ...] = ()
+    stands: tuple[Stand, ...] = ()
+    map_points: tuple[MapPoint, ...] = ()
+    # Walkable floor area: outer polygons with holes, in metres of the venue frame. Loaded from a
+    # GeoJSON file named in the venue file (path relative to it) or given inline; stored inline in
+    # a session log so the log stands alone. Each polygon is [outer ring, hole, hole, ...], a ring
+    # a list of [x, y].
+    floor_plan: tuple[Any, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -121,6 +156,7 @@ class Agent:
     start_y_m: float = 0.0
     start_heading_rad: float = 0.0
     route: Route = Route.STRAIGHT  # swimmers: the planned path of every length
+    height_m: float = 1.70  # pedestrians: body height, for the paper's cadence-to-speed model
 
     def sensor(self, mount: Mount) -> Sensor | None:
         """The agent's sensor at `mount`, or None when it has none there."""
@@ -258,11 +294,86 @@ def _agent(data: dict[str, Any], where: str) -> Agent:
         start_y_m=_number(data, "start_y_m", where, 0.0, -1e3, 1e3),
         start_heading_rad=_number(data, "start_heading_rad", where, 0.0, -10.0, 10.0),
         route=_enum(data, "route", where, Route, "straight"),
+        height_m=_number(data, "height_m", where, 1.70, 0.5, 2.5),
     )
 
 
-def session_from_dict(data: dict[str, Any], where: str = "session") -> Session:
-    """Validate a plain dict (from TOML or JSON) into a Session; ConfigError names the key path."""
+def _stand(data: dict[str, Any], where: str) -> Stand:
+    _check_keys(data, Stand, where)
+    return Stand(
+        id=check_id(_required(data, "id", where), f"{where}.id"),
+        x_m=_number(data, "x_m", where, _required(data, "x_m", where), -1e4, 1e4),
+        y_m=_number(data, "y_m", where, _required(data, "y_m", where), -1e4, 1e4),
+        floor=int(_number(data, "floor", where, 0, -20, 200)),
+        heading_deg=_number(data, "heading_deg", where, 0.0, -360.0, 360.0),
+        tilt_deg=_number(data, "tilt_deg", where, 0.0, -90.0, 90.0),
+    )
+
+
+def _map_point(data: dict[str, Any], where: str) -> MapPoint:
+    _check_keys(data, MapPoint, where)
+    directions = _required(data, "directions_deg", where)
+    if not isinstance(directions, list) or not directions:
+        raise ConfigError(f"{where}.directions_deg: expected a non-empty list of angles in degrees")
+    angles = tuple(_number({f"directions_deg[{i}]": d}, f"directions_deg[{i}]", where, 0.0, -360.0, 360.0)
+                   for i, d in enumerate(directions))
+    return MapPoint(
+        id=check_id(_required(data, "id", where), f"{where}.id"),
+        x_m=_number(data, "x_m", where, _required(data, "x_m", where), -1e4, 1e4),
+        y_m=_number(data, "y_m", where, _required(data, "y_m", where), -1e4, 1e4),
+        directions_deg=angles,
+        floor=int(_number(data, "floor", where, 0, -20, 200)),
+    )
+
+
+def _ring(ring: Any, where: str) -> list[list[float]]:
+    if not isinstance(ring, list) or len(ring) < 3:
+        raise ConfigError(f"{where}: a ring needs at least 3 [x, y] points")
+    points = []
+    for i, point in enumerate(ring):
+        if (not isinstance(point, list) or len(point) != 2
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in point)):
+            raise ConfigError(f"{where}[{i}]: {point!r} is not a finite [x, y]")
+        points.append([float(point[0]), float(point[1])])
+    return points
+
+
+def floor_plan_from(value: Any, where: str, base: Path | None = None) -> tuple[Any, ...]:
+    """The venue's walkable polygons from a GeoJSON path (relative to `base`, the venue file's
+    folder) or an inline list of polygons; ConfigError naming `where` on any mistake. A GeoJSON
+    file's Polygon/MultiPolygon features are taken as walkable areas (their holes as obstacles);
+    its coordinates must already be metres in the venue frame (reckon import ilc converts)."""
+    if isinstance(value, str):
+        path = Path(value) if base is None or Path(value).is_absolute() else base / value
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except OSError as error:
+            raise ConfigError(f"{where}: cannot read {path} ({error.strerror})") from None
+        except json.JSONDecodeError as error:
+            raise ConfigError(f"{where}: {path} is not JSON ({error})") from None
+        polygons = []
+        for i, feature in enumerate(data.get("features", []) if isinstance(data, dict) else []):
+            geometry = feature.get("geometry") or {}
+            if geometry.get("type") == "Polygon":
+                polygons.append(geometry["coordinates"])
+            elif geometry.get("type") == "MultiPolygon":
+                polygons.extend(geometry["coordinates"])
+        if not polygons:
+            raise ConfigError(f"{where}: {path} has no Polygon or MultiPolygon features")
+        value, where = polygons, f"{where} ({path})"
+    if not isinstance(value, list):
+        raise ConfigError(f"{where}: expected a GeoJSON file path or a list of polygons")
+    plan = []
+    for i, polygon in enumerate(value):
+        if not isinstance(polygon, list) or not polygon:
+            raise ConfigError(f"{where}[{i}]: a polygon is a list of rings (outer first, then holes)")
+        plan.append([_ring(ring, f"{where}[{i}][{j}]") for j, ring in enumerate(polygon)])
+    return tuple(plan)
+
+
+def session_from_dict(data: dict[str, Any], where: str = "session", base: Path | None = None) -> Session:
+    """Validate a plain dict (from TOML or JSON) into a Session; ConfigError names the key path.
+    `base` is the folder that relative file names in it (the floor plan) are read from."""
     allowed = {"venue", "agents", "source", "format_version"}
     for key in data:
         if key not in allowed:
@@ -278,12 +389,18 @@ def session_from_dict(data: dict[str, Any], where: str = "session") -> Session:
         court_length_m=_number(venue_data, "court_length_m", vwhere, 28.0, 1.0, 500.0),
         court_width_m=_number(venue_data, "court_width_m", vwhere, 15.0, 1.0, 500.0),
         beacons=beacons,
+        stands=tuple(_stand(b, f"{vwhere}.stands[{i}]") for i, b in enumerate(_list(venue_data, "stands", vwhere))),
+        map_points=tuple(_map_point(b, f"{vwhere}.map_points[{i}]")
+                         for i, b in enumerate(_list(venue_data, "map_points", vwhere))),
+        floor_plan=floor_plan_from(venue_data["floor_plan"], f"{vwhere}.floor_plan", base)
+        if "floor_plan" in venue_data else (),
     )
     agents = tuple(_agent(a, f"{where}: agents[{i}]") for i, a in enumerate(_list(data, "agents", where)))
     if not agents:
         raise ConfigError(f"{where}: no agents (add at least one [[agents]] table)")
     for kind, ids in (("agent id", [a.id for a in agents]), ("sensor id", [s.id for a in agents for s in a.sensors]),
-                      ("beacon id", [b.id for b in beacons]),
+                      ("beacon id", [b.id for b in beacons]), ("stand id", [b.id for b in venue.stands]),
+                      ("map point id", [p.id for p in venue.map_points]),
                       ("beacon identity", [b.identity for b in beacons if b.identity])):
         duplicates = sorted({item for item in ids if ids.count(item) > 1})
         if duplicates:
@@ -302,7 +419,7 @@ def load_toml(path: Path) -> Session:
         raise ConfigError(f"{path}: cannot read ({error.strerror})") from None
     except tomllib.TOMLDecodeError as error:
         raise ConfigError(f"{path}: not valid TOML ({error})") from None
-    return session_from_dict(data, where=str(path))
+    return session_from_dict(data, where=str(path), base=Path(path).parent)
 
 
 def to_dict(session: Session) -> dict[str, Any]:
@@ -315,6 +432,12 @@ def to_dict(session: Session) -> dict[str, Any]:
             fields = {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
             if isinstance(value, Beacon) and value.identity is None:
                 del fields["identity"]  # optional and newer: logs without identities stay as they were
+            if isinstance(value, Venue):  # newer and optional: older logs stay byte-identical
+                for name in ("stands", "map_points", "floor_plan"):
+                    if not fields[name]:
+                        del fields[name]
+            if isinstance(value, Agent) and value.kind is not AgentKind.PEDESTRIAN:
+                del fields["height_m"]
             return fields
         if isinstance(value, (list, tuple)):
             return [plain(v) for v in value]

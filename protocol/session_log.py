@@ -116,6 +116,7 @@ class SessionData:
     problems: list[str] = field(default_factory=list)
     lengths: dict[str, list[Any]] = field(default_factory=dict)  # agent id -> TruthLength messages, in time order
     cameras: dict[str, CameraTracks] = field(default_factory=dict)
+    scans: dict[str, list[Any]] = field(default_factory=dict)  # agent id -> StandScan messages, in time order
 
     @property
     def start_ns(self) -> int:
@@ -224,6 +225,7 @@ def read_session(path: Path | str) -> SessionData:
     lengths: dict[str, list[Any]] = defaultdict(list)
     frames: dict[str, list[Any]] = defaultdict(list)
     labels: dict[str, dict[int, Any]] = defaultdict(dict)
+    scans: dict[str, list[Any]] = defaultdict(list)
     for _, _, msg in log_messages:
         kind = msg.DESCRIPTOR.name
         if kind == "ImuBatch":
@@ -241,6 +243,8 @@ def read_session(path: Path | str) -> SessionData:
             frames[msg.camera_id].append(msg)
         elif kind == "TruthTrackLabel":
             labels[msg.camera_id][msg.frame] = msg
+        elif kind == "StandScan":
+            scans[msg.agent_id].append(msg)
     session, skipped = log_messages.session, log_messages.skipped
     if session is None:
         raise InputError(f"{path}: not a reckon session (no '{METADATA_NAME}' metadata record"
@@ -262,10 +266,10 @@ def read_session(path: Path | str) -> SessionData:
     contacts.sort(key=lambda c: c.time_ns)
     for problem in problems:
         log.warning("%s", problem)
-    for rows in lengths.values():
+    for rows in (*lengths.values(), *scans.values()):
         rows.sort(key=lambda m: m.timestamp_ns)
     cameras = {camera_id: _camera_tracks(camera_id, rows, labels.get(camera_id)) for camera_id, rows in frames.items()}
-    return SessionData(session, imu, truth, sightings, contacts, problems, dict(lengths), cameras)
+    return SessionData(session, imu, truth, sightings, contacts, problems, dict(lengths), cameras, dict(scans))
 
 
 def _camera_tracks(camera_id: str, rows: list[Any], labels: dict[int, Any] | None) -> CameraTracks:

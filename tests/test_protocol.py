@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import copy
+import json
+import re
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -49,6 +53,9 @@ def test_every_message_round_trips_with_schema_version():
                                 person_id=["p1", "p2+extra1"]),
         "TrackIdentity": dict(timestamp_ns=12, agent_id="p1", camera_id="cam1", track_id=3, method="reckon",
                               score=2.5),
+        "StandScan": dict(timestamp_ns=13, agent_id="walker1", sensor_id="phone", stand_id="lobby", x_m=3.3,
+                          y_m=33.55, floor=1, heading_rad=-1.57, tilt_rad=0.0, payload="RK1|...", accepted=False,
+                          reason="integrity code does not match"),
     }
     assert set(samples) == set(messages.TABLES)
     for name, fields in samples.items():
@@ -268,3 +275,46 @@ def test_identity_rule_is_the_edge_decoders_rule(text):
         except ConfigError as error:
             results.append(str(error))
     assert results[0] == results[1]
+
+
+PEDESTRIAN_VENUE = {
+    "venue": {"name": "hall", "stands": [{"id": "entrance", "x_m": 3.3, "y_m": 33.55, "heading_deg": -90.0}],
+              "map_points": [{"id": "A", "x_m": 0.0, "y_m": 0.0, "directions_deg": [0, 90]},
+                             {"id": "B", "x_m": 3.3, "y_m": 0.0, "directions_deg": [0, 180, 90]}],
+              "floor_plan": [[[[0, -1], [5, -1], [5, 1], [0, 1]]]]},
+    "agents": [{"id": "walker1", "kind": "pedestrian", "height_m": 1.74,
+                "sensors": [{"id": "walker1-phone", "mount": "hand", "rate_hz": 50, "forward_axis": "+y",
+                             "left_axis": "-x"}]}],
+}
+
+
+def test_pedestrian_venue_round_trips_through_json_and_a_geojson_file(tmp_path):
+    session = session_from_dict(PEDESTRIAN_VENUE)
+    assert session_from_dict(to_dict(session)) == session
+    assert session.venue.stands[0].heading_deg == -90.0 and session.agents[0].height_m == 1.74
+    plan = {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [[[0, -1], [5, -1], [5, 1], [0, 1]]]}}]}
+    (tmp_path / "plan.geojson").write_text(json.dumps(plan))
+    (tmp_path / "venue.toml").write_text('[venue]\nname = "hall"\nfloor_plan = "plan.geojson"\n'
+                                         '[[agents]]\nid = "walker1"\nkind = "pedestrian"\n')
+    assert load_toml(tmp_path / "venue.toml").venue.floor_plan == session.venue.floor_plan
+    # A chair venue's description is unchanged by the pedestrian fields (older logs stay identical).
+    assert "stands" not in to_dict(session_from_dict(SESSION))["venue"]
+    assert "height_m" not in to_dict(session_from_dict(SESSION))["agents"][0]
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda d: d["venue"]["stands"][0].update(heading_deg=400), "venue.stands[0].heading_deg: 400 is outside"),
+    (lambda d: d["venue"]["map_points"][0].update(directions_deg=[]), "venue.map_points[0].directions_deg: expected"),
+    (lambda d: d["venue"]["map_points"][1].update(directions_deg=[0, "north"]),
+     "venue.map_points[1].directions_deg[1]: 'north' is not a finite number"),
+    (lambda d: d["venue"].update(floor_plan=[[[[0, 0], [1, 0]]]]), "venue.floor_plan[0][0]: a ring needs at least 3"),
+    (lambda d: d["venue"].update(floor_plan="missing.geojson"), "venue.floor_plan: cannot read missing.geojson"),
+    (lambda d: d["venue"]["stands"].append({"id": "entrance", "x_m": 0, "y_m": 0}), "duplicate stand id 'entrance'"),
+    (lambda d: d["agents"][0].update(height_m=3.1), "agents[0].height_m: 3.1 is outside [0.5, 2.5]"),
+])
+def test_pedestrian_venue_errors_name_the_key(mutate, message):
+    data = copy.deepcopy(PEDESTRIAN_VENUE)
+    mutate(data)
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        session_from_dict(data)
