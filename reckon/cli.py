@@ -83,6 +83,15 @@ def run_sim_room(args: argparse.Namespace, progress: Callable[[str], None]) -> i
 
 
 def run_import(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    if args.format == "ilc":
+        from reckon.importers.ilc_session import import_walks
+
+        for walk in import_walks([Path(p) for p in args.folder], Path(args.output)):
+            print(walk)
+        return 0
+    if len(args.folder) != 1:
+        raise ReckonError(f"reckon import {args.format}: one PATH expected, got {len(args.folder)}")
+    args.folder = args.folder[0]
     if args.format == "tracks":
         from reckon.importers.tracks_csv import import_tracks_csv
 
@@ -330,11 +339,14 @@ def build_parser() -> argparse.ArgumentParser:
     room.set_defaults(run=run_sim_room)
 
     imp = sub.add_parser("import", help="convert recorded logs into a session log")
-    imp.add_argument("format", choices=["csv", "ngimu", "tsnd", "tracks"],
+    imp.add_argument("format", choices=["csv", "ngimu", "tsnd", "tracks", "ilc"],
                      help="csv: docs/csv-import.md; ngimu: x-io NGIMU folders; tsnd: an ATR TSND121/151 CSV log; "
-                          "tracks: a camera tracker's tracks, MOTChallenge-style CSV")
-    imp.add_argument("folder", metavar="PATH", help="the folder (csv, ngimu) or the CSV file (tsnd, tracks)")
-    imp.add_argument("-o", "--output", required=True)
+                          "tracks: a camera tracker's tracks, MOTChallenge-style CSV; ilc: Indoor Location "
+                          "Competition 2.0 phone walks (docs/pdr-estimator.md)")
+    imp.add_argument("folder", metavar="PATH", nargs="+",
+                     help="the folder (csv, ngimu), the CSV file (tsnd, tracks), or walk files (ilc: several)")
+    imp.add_argument("-o", "--output", required=True,
+                     help="the session log; ilc with several walks: a folder for one log per walk")
     ngimu = imp.add_argument_group("ngimu and tsnd options")
     ngimu.add_argument("--wheel-diameter-m", type=float, default=0.62, help="wheel diameter (default 0.62 m)")
     ngimu.add_argument("--agent", help="agent id (ngimu: default chair; tsnd: default the swimmer)")
@@ -354,6 +366,10 @@ def build_parser() -> argparse.ArgumentParser:
     tracks.add_argument("--position-sd", type=float, metavar="M",
                         help="the tracker's 1-sigma position error per axis (default 0.1 m, with a warning)")
     imp.set_defaults(run=run_import)
+
+    from reckon import qr
+
+    qr.register(sub)
 
     ev = sub.add_parser("eval", help="run the estimators over a session and score them against truth")
     ev.add_argument("session")

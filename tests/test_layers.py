@@ -8,7 +8,7 @@ import sys
 
 CORES = ["edge.chair_estimator", "edge.chair_merger", "edge.wheel", "edge.paper_dr", "edge.impacts", "edge.mag_heading",
          "edge.mounting", "edge.decoders", "hub.paper_rules", "hub.chair_corrections", "hub.track_paper",
-         "protocol.messages",
+         "protocol.messages", "protocol.stand_code",
          "protocol.keys", "protocol.session", "protocol.bus"]
 FORBIDDEN = {"zenoh", "serial", "bleak", "mcap", "mcap_protobuf", "asyncio", "socket", "matplotlib"}
 

@@ -1,0 +1,244 @@
+"""Our phone pedestrian dead reckoning: per-step output, quaternion attitude, learned step length.
+
+Inputs are what Android reports (PhoneSample): accelerometer m/s^2 (gravity included), gyroscope
+rad/s, magnetometer uT, in the phone frame (x right, y to the top of the screen, z out of it).
+- Attitude: x-io Fusion's AHRS (`imufusion.Ahrs`, quaternion: no gimbal lock, unlike the paper's
+  Euler angles) fed with the gyro after Fusion's offset algorithm (`imufusion.Bias`: re-learns the
+  gyro bias whenever the phone is still). Levelled from gravity on the first sample.
+- Steps: edge/pdr_steps.py (peaks of low-passed |a|); step length = K * Weinberg amplitude, K a
+  per-user state re-learned between two calibration stands (distance between them / sum of
+  amplitudes, bounded to [k_min, k_max] and smoothed).
+- Walking direction: the heading of the device's forward axis (settings.forward_axis, +y for a
+  phone held flat in front), averaged over the step as a unit vector (the body sways +-5 deg
+  within a stride), plus `walking_offset_rad`: 0 in the hand; learned from the horizontal
+  acceleration's principal axis (edge/pdr_direction.py) for a phone in a pocket or swinging.
+- Magnetometer: a gated aid only (the paper found it unusable on upper floors): edge/pdr_magnetic.py.
+- Uncertainty: a 3x3 covariance over (x, y, heading), propagated per step through the motion's
+  Jacobian with along-track (step length) and heading (gyro drift, scale) noise.
+Heading: counter-clockwise from the venue's +x axis, radians.
+
+`PdrEstimator` is a small class because imufusion's Ahrs is a mutable C object; its state is
+fixed-size (no lists grow); `snapshot()` returns it as a frozen PdrState. dt comes from the
+timestamps; a gap over `gap_s` sets a counter, a timestamp that does not advance is ignored.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import imufusion
+import numpy as np
+
+from edge import pdr_steps
+from edge.pdr_steps import StepSettings, StepState
+
+DEGREES_PER_RADIAN = 180.0 / math.pi
+STANDARD_GRAVITY_MS2 = 9.80665
+
+
+@dataclass(frozen=True)
+class PhoneSample:
+    """One phone sample: unix or boot ns, m/s^2, rad/s, uT (None: no magnetometer reading)."""
+
+    time_ns: int
+    accel_ms2: tuple[float, float, float]
+    gyro_rads: tuple[float, float, float]
+    mag_ut: tuple[float, float, float] | None = None
+
+
+@dataclass(frozen=True)
+class PdrStep:
+    """The pose after one step. covariance over (x_m, y_m, heading_rad)."""
+
+    time_ns: int
+    x_m: float
+    y_m: float
+    heading_rad: float
+    step_length_m: float
+    covariance: np.ndarray
+    count: int
+
+
+@dataclass(frozen=True)
+class PdrSettings:
+    sample_rate_hz: float = 50.0  # nominal rate for Fusion's settings; dt itself comes from timestamps
+    ahrs_gain: float = 0.5  # Fusion's default complementary gain
+    acceleration_rejection_deg: float = 10.0  # Fusion's default: hand accelerations past this are not gravity
+    rejection_timeout_s: float = 5.0  # Fusion's default recovery time
+    gyro_range_dps: float = 2000.0  # phone gyros: +-2000 deg/s
+    bias_threshold_dps: float = 3.0  # Fusion offset algorithm: still below this ...
+    bias_period_s: float = 3.0  # ... for this long
+    forward_axis: tuple[float, float, float] = (0.0, 1.0, 0.0)  # phone flat in front: the top of the screen
+    step_gain_m: float = 0.38  # K (m per Weinberg unit): tuned on ILC walks 1-3 (docs/pdr-estimator.md)
+    step_gain_min_m: float = 0.25  # bounds of a learned K: steps 0.35-1.0 m for typical amplitudes
+    step_gain_max_m: float = 0.6
+    step_gain_smoothing: float = 0.5  # weight of a newly learned K against the previous one
+    step_gain_min_sum: float = 10.0  # learn K only over this many Weinberg units (about 10 steps)
+    step_length_sd_fraction: float = 0.08  # per-step length error (Weinberg: ~8 % of distance)
+    heading_drift_sd_rad_per_sqrt_s: float = 0.004  # residual gyro bias, walking sway
+    gyro_scale_sd: float = 0.01  # heading error per radian turned (phone gyro scale)
+    stand_position_sd_m: float = 0.3  # a QR stand's pose fix (algorithms.md)
+    stand_heading_sd_rad: float = 0.05  # about 3 deg, the paper's calibration error
+    gap_s: float = 0.25
+    steps: StepSettings = field(default_factory=StepSettings)
+
+
+@dataclass(frozen=True)
+class PdrState:
+    """A frozen snapshot of the estimator (diagnostics and tests)."""
+
+    time_ns: int
+    x_m: float
+    y_m: float
+    heading_offset_rad: float  # venue heading = device forward heading in Fusion's frame + this
+    covariance: np.ndarray
+    quaternion: np.ndarray
+    gyro_offset_dps: np.ndarray
+    step_gain_m: float
+    steps: StepState
+    stand_x_m: float | None
+    stand_y_m: float | None
+    weinberg_since_stand: float
+    gaps: int
+    backwards: int
+
+
+class PdrEstimator:
+    """`step(sample) -> list[PdrStep]`; `reset_to_stand(...)` applies a calibration stand."""
+
+    def __init__(self, settings: PdrSettings = PdrSettings()):
+        self.settings = settings
+        ahrs_settings = imufusion.AhrsSettings(
+            sample_rate=settings.sample_rate_hz, convention=imufusion.CONVENTION_NWU, gain=settings.ahrs_gain,
+            gyroscope_range=settings.gyro_range_dps, acceleration_rejection=settings.acceleration_rejection_deg,
+            magnetic_rejection=0.0, rejection_timeout=settings.rejection_timeout_s)
+        self.ahrs = imufusion.Ahrs()
+        self.ahrs.set_settings(ahrs_settings)
+        self.bias = imufusion.Bias()
+        self.bias.set_settings(imufusion.BiasSettings(sample_rate=settings.sample_rate_hz,
+                                                      stationary_threshold=settings.bias_threshold_dps,
+                                                      stationary_period=settings.bias_period_s))
+        self.forward = np.array(settings.forward_axis, dtype=float)
+        self.time_ns = -1
+        self.x_m = self.y_m = 0.0
+        self.heading_offset_rad = 0.0
+        self.covariance = np.diag([1e6, 1e6, math.pi ** 2])  # no pose until a stand
+        self.step_gain_m = settings.step_gain_m
+        self.steps = StepState()
+        self.stand: tuple[float, float] | None = None
+        self.weinberg_since_stand = 0.0
+        self.direction_sum = np.zeros(2)  # forward axis heading over the current step, unit vectors summed
+        self.turn_since_step_rad = 0.0
+        self.last_heading_rad = 0.0
+        self.gaps = self.backwards = 0
+
+    def device_heading_rad(self) -> float:
+        """Heading of the forward axis in Fusion's earth frame (counter-clockwise about up)."""
+        rotation = imufusion.quaternion_to_matrix(self.ahrs.get_quaternion())
+        forward = rotation @ self.forward
+        return math.atan2(forward[1], forward[0])
+
+    def step(self, sample: PhoneSample) -> list[PdrStep]:
+        """Feed one sample; returns the step completed by it (at most one)."""
+        if self.time_ns >= 0 and sample.time_ns <= self.time_ns:
+            self.backwards += 1
+            return []
+        accel_g = np.asarray(sample.accel_ms2, dtype=float) / STANDARD_GRAVITY_MS2
+        gyro_dps = self.bias.update(np.asarray(sample.gyro_rads, dtype=float) * DEGREES_PER_RADIAN)
+        if self.time_ns < 0:
+            self.ahrs.set_quaternion(levelled_quaternion(accel_g))
+            self.ahrs.skip_startup()  # levelled already; Fusion would zero the heading during its startup
+            self.last_heading_rad = self.device_heading_rad()
+        else:
+            dt_s = (sample.time_ns - self.time_ns) * 1e-9
+            if dt_s > self.settings.gap_s:
+                self.gaps += 1
+            self.ahrs.set_sample_period(dt_s)
+            self.ahrs.update_no_magnetometer(gyro_dps, accel_g)
+        self.time_ns = sample.time_ns
+        heading = self.device_heading_rad()
+        self.turn_since_step_rad += abs(wrap(heading - self.last_heading_rad))
+        self.last_heading_rad = heading
+        self.direction_sum += (math.cos(heading), math.sin(heading))
+        self.steps, event = pdr_steps.step(self.settings.steps, self.steps, sample.time_ns, sample.accel_ms2)
+        return [] if event is None else [self._advance(event)]
+
+    def _advance(self, event: pdr_steps.StepEvent) -> PdrStep:
+        settings = self.settings
+        heading = math.atan2(self.direction_sum[1], self.direction_sum[0]) + self.heading_offset_rad
+        length = self.step_gain_m * event.weinberg
+        self.weinberg_since_stand += event.weinberg
+        cos_h, sin_h = math.cos(heading), math.sin(heading)
+        self.x_m += length * cos_h
+        self.y_m += length * sin_h
+        jacobian = np.array([[1.0, 0.0, -length * sin_h], [0.0, 1.0, length * cos_h], [0.0, 0.0, 1.0]])
+        along = np.array([cos_h, sin_h, 0.0])
+        heading_var = (settings.heading_drift_sd_rad_per_sqrt_s ** 2 * event.duration_s
+                       + (settings.gyro_scale_sd * self.turn_since_step_rad) ** 2)
+        noise = (settings.step_length_sd_fraction * length) ** 2 * np.outer(along, along)
+        noise[2, 2] += heading_var
+        self.covariance = jacobian @ self.covariance @ jacobian.T + noise
+        self.direction_sum[:] = 0.0
+        self.turn_since_step_rad = 0.0
+        return PdrStep(event.time_ns, self.x_m, self.y_m, wrap(heading), length, self.covariance.copy(), event.count)
+
+    def reset_to_stand(self, time_ns: int, x_m: float, y_m: float, heading_rad: float,
+                       tilt_rad: float | None = 0.0) -> None:
+        """A calibration stand scan: the phone lies on the stand at (x_m, y_m), its forward axis at
+        `heading_rad`, tilted `tilt_rad` about its x axis (None: keep the AHRS's own tilt).
+        With a previous stand known, K is re-learned from the distance between the two stands
+        over the Weinberg amplitudes summed since (bounded, smoothed; skipped below
+        step_gain_min_sum: too few steps to tell K from noise)."""
+        settings = self.settings
+        if self.stand is not None and self.weinberg_since_stand >= settings.step_gain_min_sum:
+            walked_m = math.hypot(x_m - self.stand[0], y_m - self.stand[1])
+            learned = min(max(walked_m / self.weinberg_since_stand, settings.step_gain_min_m), settings.step_gain_max_m)
+            self.step_gain_m += settings.step_gain_smoothing * (learned - self.step_gain_m)
+        if tilt_rad is not None:
+            yaw = self.device_heading_rad() - math.atan2(self.forward[1], self.forward[0])
+            self.ahrs.set_quaternion(quaternion_multiply(axis_angle(2, yaw), axis_angle(0, tilt_rad)))
+        self.heading_offset_rad = wrap(heading_rad - self.device_heading_rad())
+        self.x_m, self.y_m = x_m, y_m
+        self.stand = (x_m, y_m)
+        self.weinberg_since_stand = 0.0
+        self.direction_sum[:] = 0.0
+        self.turn_since_step_rad = 0.0
+        self.covariance = np.diag([settings.stand_position_sd_m ** 2, settings.stand_position_sd_m ** 2,
+                                   settings.stand_heading_sd_rad ** 2])
+        if time_ns > self.time_ns:
+            self.time_ns = time_ns
+
+    def snapshot(self) -> PdrState:
+        return PdrState(self.time_ns, self.x_m, self.y_m, self.heading_offset_rad, self.covariance.copy(),
+                        np.array(self.ahrs.get_quaternion()), np.array(self.bias.get_offset()), self.step_gain_m,
+                        self.steps, None if self.stand is None else self.stand[0],
+                        None if self.stand is None else self.stand[1], self.weinberg_since_stand, self.gaps,
+                        self.backwards)
+
+
+def wrap(angle_rad: float) -> float:
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def axis_angle(axis: int, angle_rad: float) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation by angle_rad about earth axis 0, 1 or 2."""
+    quaternion = np.zeros(4)
+    quaternion[0] = math.cos(angle_rad / 2.0)
+    quaternion[1 + axis] = math.sin(angle_rad / 2.0)
+    return quaternion
+
+
+def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw])
+
+
+def levelled_quaternion(accel_g: np.ndarray) -> np.ndarray:
+    """The attitude with zero yaw whose up axis is the measured gravity (specific force)."""
+    up = accel_g / max(float(np.linalg.norm(accel_g)), 1e-9)
+    roll = math.atan2(up[1], up[2])
+    pitch = math.atan2(-up[0], math.hypot(up[1], up[2]))
+    return quaternion_multiply(axis_angle(1, pitch), axis_angle(0, roll))
