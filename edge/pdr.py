@@ -31,6 +31,7 @@ import imufusion
 import numpy as np
 
 from edge import pdr_steps
+from edge.pdr_magnetic import MagneticAid, MagneticSettings, VenueField
 from edge.pdr_steps import StepSettings, StepState
 
 DEGREES_PER_RADIAN = 180.0 / math.pi
@@ -82,6 +83,7 @@ class PdrSettings:
     stand_heading_sd_rad: float = 0.05  # about 3 deg, the paper's calibration error
     gap_s: float = 0.25
     steps: StepSettings = field(default_factory=StepSettings)
+    magnetic: MagneticSettings = field(default_factory=MagneticSettings)
 
 
 @dataclass(frozen=True)
@@ -107,8 +109,10 @@ class PdrState:
 class PdrEstimator:
     """`step(sample) -> list[PdrStep]`; `reset_to_stand(...)` applies a calibration stand."""
 
-    def __init__(self, settings: PdrSettings = PdrSettings()):
+    def __init__(self, settings: PdrSettings = PdrSettings(), venue_field: VenueField | None = None):
+        """`venue_field`: the venue's undisturbed Earth field; None: the magnetometer is not used."""
         self.settings = settings
+        self.magnetic = MagneticAid(venue_field, settings.magnetic) if venue_field is not None else None
         ahrs_settings = imufusion.AhrsSettings(
             sample_rate=settings.sample_rate_hz, convention=imufusion.CONVENTION_NWU, gain=settings.ahrs_gain,
             gyroscope_range=settings.gyro_range_dps, acceleration_rejection=settings.acceleration_rejection_deg,
@@ -127,15 +131,17 @@ class PdrEstimator:
         self.step_gain_m = settings.step_gain_m
         self.steps = StepState()
         self.stand: tuple[float, float] | None = None
+        self.pending_stand: tuple[int, float, float, float, float | None, float | None] | None = None
         self.weinberg_since_stand = 0.0
         self.direction_sum = np.zeros(2)  # forward axis heading over the current step, unit vectors summed
         self.turn_since_step_rad = 0.0
         self.last_heading_rad = 0.0
         self.gaps = self.backwards = 0
 
-    def device_heading_rad(self) -> float:
+    def device_heading_rad(self, rotation: np.ndarray | None = None) -> float:
         """Heading of the forward axis in Fusion's earth frame (counter-clockwise about up)."""
-        rotation = imufusion.quaternion_to_matrix(self.ahrs.get_quaternion())
+        if rotation is None:
+            rotation = imufusion.quaternion_to_matrix(self.ahrs.get_quaternion())
         forward = rotation @ self.forward
         return math.atan2(forward[1], forward[0])
 
@@ -150,6 +156,10 @@ class PdrEstimator:
             self.ahrs.set_quaternion(levelled_quaternion(accel_g))
             self.ahrs.skip_startup()  # levelled already; Fusion would zero the heading during its startup
             self.last_heading_rad = self.device_heading_rad()
+            self.time_ns = sample.time_ns
+            if self.pending_stand is not None:  # scanned before the first sample: applied on a levelled attitude
+                stand, self.pending_stand = self.pending_stand, None
+                self.reset_to_stand(*stand)
         else:
             dt_s = (sample.time_ns - self.time_ns) * 1e-9
             if dt_s > self.settings.gap_s:
@@ -157,7 +167,10 @@ class PdrEstimator:
             self.ahrs.set_sample_period(dt_s)
             self.ahrs.update_no_magnetometer(gyro_dps, accel_g)
         self.time_ns = sample.time_ns
-        heading = self.device_heading_rad()
+        rotation = imufusion.quaternion_to_matrix(self.ahrs.get_quaternion())
+        heading = self.device_heading_rad(rotation)
+        if self.magnetic is not None and sample.mag_ut is not None:
+            self.magnetic.add(rotation, sample.mag_ut)
         self.turn_since_step_rad += abs(wrap(heading - self.last_heading_rad))
         self.last_heading_rad = heading
         self.direction_sum += (math.cos(heading), math.sin(heading))
@@ -181,16 +194,41 @@ class PdrEstimator:
         self.covariance = jacobian @ self.covariance @ jacobian.T + noise
         self.direction_sum[:] = 0.0
         self.turn_since_step_rad = 0.0
+        if self.magnetic is not None:
+            measured = self.magnetic.measurement()
+            if measured is not None and self.stand is not None:
+                heading += self._magnetic_update(self.magnetic, measured)
         return PdrStep(event.time_ns, self.x_m, self.y_m, wrap(heading), length, self.covariance.copy(), event.count)
 
+    def _magnetic_update(self, magnetic: MagneticAid, measured_offset_rad: float) -> float:
+        """Kalman update of (x, y, heading) by one step's magnetic offset measurement: the
+        position moves too, by its correlation with the heading it was walked on. Returns the
+        heading change (0 when gated out)."""
+        innovation = wrap(measured_offset_rad - self.heading_offset_rad)
+        variance = self.covariance[2, 2] + self.settings.magnetic.heading_sd_rad ** 2
+        if innovation ** 2 > self.settings.magnetic.gate_sigma ** 2 * variance:
+            magnetic.rejected += 1
+            return 0.0
+        gain = self.covariance[:, 2] / variance
+        self.x_m += gain[0] * innovation
+        self.y_m += gain[1] * innovation
+        self.heading_offset_rad = wrap(self.heading_offset_rad + gain[2] * innovation)
+        self.covariance = self.covariance - np.outer(gain, self.covariance[2, :])
+        magnetic.used += 1
+        return float(gain[2] * innovation)
+
     def reset_to_stand(self, time_ns: int, x_m: float, y_m: float, heading_rad: float,
-                       tilt_rad: float | None = 0.0) -> None:
+                       tilt_rad: float | None = 0.0, heading_sd_rad: float | None = None) -> None:
         """A calibration stand scan: the phone lies on the stand at (x_m, y_m), its forward axis at
-        `heading_rad`, tilted `tilt_rad` about its x axis (None: keep the AHRS's own tilt).
+        `heading_rad` (known to `heading_sd_rad`; None or 0: a real stand's stand_heading_sd_rad),
+        tilted `tilt_rad` about its x axis (None: keep the AHRS's own tilt).
         With a previous stand known, K is re-learned from the distance between the two stands
         over the Weinberg amplitudes summed since (bounded, smoothed; skipped below
         step_gain_min_sum: too few steps to tell K from noise)."""
         settings = self.settings
+        if self.time_ns < 0:
+            self.pending_stand = (time_ns, x_m, y_m, heading_rad, tilt_rad, heading_sd_rad)
+            return
         if self.stand is not None and self.weinberg_since_stand >= settings.step_gain_min_sum:
             walked_m = math.hypot(x_m - self.stand[0], y_m - self.stand[1])
             learned = min(max(walked_m / self.weinberg_since_stand, settings.step_gain_min_m), settings.step_gain_max_m)
@@ -204,10 +242,8 @@ class PdrEstimator:
         self.weinberg_since_stand = 0.0
         self.direction_sum[:] = 0.0
         self.turn_since_step_rad = 0.0
-        self.covariance = np.diag([settings.stand_position_sd_m ** 2, settings.stand_position_sd_m ** 2,
-                                   settings.stand_heading_sd_rad ** 2])
-        if time_ns > self.time_ns:
-            self.time_ns = time_ns
+        heading_sd = heading_sd_rad if heading_sd_rad else settings.stand_heading_sd_rad
+        self.covariance = np.diag([settings.stand_position_sd_m ** 2, settings.stand_position_sd_m ** 2, heading_sd ** 2])
 
     def snapshot(self) -> PdrState:
         return PdrState(self.time_ns, self.x_m, self.y_m, self.heading_offset_rad, self.covariance.copy(),

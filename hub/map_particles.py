@@ -38,6 +38,7 @@ class ParticleSettings:
     along_noise_m_per_sqrt_m: float = 0.05  # 0.04 m on a 0.7 m step: 6 %, Weinberg step-length scatter
     cross_noise_m_per_sqrt_m: float = 0.08  # 0.07 m on a 0.7 m step: about 5 deg of sway per step
     offset_walk_rad_per_sqrt_s: float = math.radians(0.6)  # 4.6 deg after a minute: gyro drift and grip changes
+    offset_reversion_s: float | None = None
     turn_scale_sd: float = 0.02  # a turn of 90 deg adds 1.8 deg of offset: phone gyro scale error
     scale_walk_per_sqrt_m: float = 0.003  # the step-length scale drifts slowly (pace changes)
     scale_limits: tuple[float, float] = (0.6, 1.6)  # outside this the dead reckoning is broken, not drifted
@@ -131,6 +132,8 @@ class ParticleMatcher:
         turn_rad = wrap_angle_rad(pose.heading_rad - previous.heading_rad)
         offset_sd_rad = math.sqrt(settings.offset_walk_rad_per_sqrt_s ** 2 * elapsed_s
                                   + (settings.turn_scale_sd * turn_rad) ** 2)
+        if settings.offset_reversion_s is not None:
+            self.offset_rad *= math.exp(-elapsed_s / settings.offset_reversion_s)
         self.offset_rad += random.normal(0.0, offset_sd_rad, count)
         self.scale = np.clip(self.scale + random.normal(0.0, settings.scale_walk_per_sqrt_m * math.sqrt(length_m),
                                                         count), *settings.scale_limits)

@@ -1,4 +1,5 @@
-"""The hub's whole job at a venue: the chairs' corrections and who is which camera track.
+"""The hub's whole job at a venue: the chairs' corrections, the pedestrians' map matching
+(hub/pedestrian_hub.py) and who is which camera track.
 
 `hub.chair_hub.ChairHub` corrects the wheelchairs (beacons, collisions, fixes); once a camera's
 first frame arrives, `hub.identity.IdentityEngine` names its tracks from every agent's motion and
@@ -14,6 +15,7 @@ import numpy as np
 
 from hub.chair_hub import ChairHub, HubSettings
 from hub.identity import IdentityEngine, IdentitySettings
+from hub.pedestrian_hub import PedestrianHub
 from protocol import keys, messages
 from protocol.session import Session
 
@@ -23,6 +25,7 @@ class VenueHub:
                  identity_settings: IdentitySettings = IdentitySettings()):
         self.session = session
         self.chairs = ChairHub(session, settings)
+        self.pedestrians = PedestrianHub(session)
         self.identity_settings = identity_settings
         self.identity: IdentityEngine | None = None
 
@@ -47,6 +50,7 @@ class VenueHub:
                     out.append(produced)
         if name != "CameraFrame":
             out += self.chairs.on_message(message, arrival_ns)
+            out += self.pedestrians.on_message(message)
         return out
 
     def flush(self) -> list[Any]:
@@ -55,6 +59,8 @@ class VenueHub:
     def key_for(self, message: Any) -> str:
         if messages.type_name(message) == "TrackIdentity":
             return keys.identity(self.session.venue.name, message.agent_id)
+        if message.agent_id in self.pedestrians.agents:
+            return self.pedestrians.key_for(message)
         return self.chairs.key_for(message)
 
     def _pose_of(self, agent_id: str, time_ns: int) -> tuple[np.ndarray, float] | None:

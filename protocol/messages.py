@@ -238,6 +238,9 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("payload", "string", False),  # the code's text as scanned
         ("accepted", "bool", False),
         ("reason", "string", False),  # why it was refused; empty when accepted
+        # 1-sigma of heading_rad; 0: a real stand's (about 3 deg, the paper's calibration). An
+        # approximate stand (a surveyed waypoint standing in for one) says how approximate.
+        ("heading_sd_rad", "double", False),
     ],
     "TruthContact": [
         ("schema_version", "uint32", False),

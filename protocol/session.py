@@ -125,6 +125,13 @@ class Venue:
     # a session log so the log stands alone. Each polygon is [outer ring, hole, hole, ...], a ring
     # a list of [x, y].
     floor_plan: tuple[Any, ...] = ()
+    # The Earth's field at the venue, for phones' magnetometers (edge/pdr_magnetic.py): the direction
+    # of magnetic north in the venue frame (deg, counter-clockwise from +x: true north's direction
+    # minus the declination), and the undisturbed field's strength and dip, which tell a clean reading
+    # from one bent by the building's steel. None: unknown, the magnetometer is not used.
+    magnetic_north_deg: float | None = None
+    magnetic_field_ut: float | None = None
+    magnetic_dip_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -197,6 +204,12 @@ def _number(data: dict[str, Any], key: str, where: str, default: float, low: flo
     if not low <= value <= high:
         raise ConfigError(f"{where}.{key}: {value} is outside [{low}, {high}]")
     return float(value)
+
+
+def _optional_number(data: dict[str, Any], key: str, where: str, low: float, high: float) -> float | None:
+    """A number within [low, high], or None when the key is absent. (The Earth's field is 22-67 uT
+    everywhere, so magnetic_field_ut's bounds catch a value given in gauss or nT.)"""
+    return None if data.get(key) is None else _number(data, key, where, 0.0, low, high)
 
 
 def _enum(data: dict[str, Any], key: str, where: str, enum_type: type[enum.Enum], default: Any = None) -> Any:
@@ -394,6 +407,9 @@ def session_from_dict(data: dict[str, Any], where: str = "session", base: Path |
                          for i, b in enumerate(_list(venue_data, "map_points", vwhere))),
         floor_plan=floor_plan_from(venue_data["floor_plan"], f"{vwhere}.floor_plan", base)
         if "floor_plan" in venue_data else (),
+        magnetic_north_deg=_optional_number(venue_data, "magnetic_north_deg", vwhere, -360.0, 360.0),
+        magnetic_field_ut=_optional_number(venue_data, "magnetic_field_ut", vwhere, 20.0, 70.0),
+        magnetic_dip_deg=_optional_number(venue_data, "magnetic_dip_deg", vwhere, -90.0, 90.0),
     )
     agents = tuple(_agent(a, f"{where}: agents[{i}]") for i, a in enumerate(_list(data, "agents", where)))
     if not agents:

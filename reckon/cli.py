@@ -128,8 +128,18 @@ def run_eval(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     from reckon.evaluation.report import to_json, to_table
     from reckon.evaluation.swim_eval import evaluate_swim, is_swim_session
 
-    path = Path(args.session)
-    data = read_session(path)
+    from reckon.evaluation import pdr_eval
+
+    paths = [Path(p) for p in args.session]
+    sessions = [(read_session(p), p) for p in paths]
+    if all(pdr_eval.is_pedestrian_session(data) for data, _ in sessions):
+        pedestrians = pdr_eval.evaluate_pedestrians(sessions, progress)
+        print(json.dumps(pdr_eval.to_json(pedestrians), indent=1) if args.json else pdr_eval.to_table(pedestrians))
+        return 0
+    if len(sessions) > 1:
+        raise ReckonError(f"reckon eval: several sessions are pooled only for pedestrian walks; "
+                          f"{paths[1]} and the others need one eval each")
+    data, path = sessions[0]
     if is_swim_session(data):
         from reckon.evaluation import swim_eval
 
@@ -337,6 +347,8 @@ def build_parser() -> argparse.ArgumentParser:
     room.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                       help="override a simulator figure (docs/simulator-room.md)")
     room.set_defaults(run=run_sim_room)
+    from sim_devices.pedestrian.cli import register as register_pedestrian
+    register_pedestrian(sim_kind)
 
     imp = sub.add_parser("import", help="convert recorded logs into a session log")
     imp.add_argument("format", choices=["csv", "ngimu", "tsnd", "tracks", "ilc"],
@@ -372,7 +384,7 @@ def build_parser() -> argparse.ArgumentParser:
     qr.register(sub)
 
     ev = sub.add_parser("eval", help="run the estimators over a session and score them against truth")
-    ev.add_argument("session")
+    ev.add_argument("session", nargs="+", help="a session log; pedestrian walks: several, pooled")
     ev.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     ev.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR")
     ev.add_argument("--identity-scaling", action="store_true",

@@ -29,6 +29,7 @@ from urllib.parse import urlparse
 import zenoh
 
 from edge.chair_edge import ChairEdge
+from edge.pdr_edge import PedestrianEdge
 from edge.swim_edge import SwimEdge
 from protocol import bus as wire
 from protocol import keys, messages
@@ -68,7 +69,7 @@ class EdgeSummary:
 
 def mcap_source(path: Path, agent_ids: str | set[str] | None, speed: float, stop: threading.Event,
                 start_at: float | None = None) -> Iterator[Any]:
-    """Agents' IMU batches and beacon sightings from a session log, paced by log time (speed 0: at once).
+    """Agents' IMU batches, beacon sightings and stand scans from a session log, paced by log time (speed 0: at once).
 
     `agent_ids`: one agent, a set, or None for all. Each ImuBatch gets `received_ns` = its log time.
     `start_at`: wall-clock time (time.time()) of the log's first message, so that several edges
@@ -77,7 +78,7 @@ def mcap_source(path: Path, agent_ids: str | set[str] | None, speed: float, stop
     wanted = {agent_ids} if isinstance(agent_ids, str) else agent_ids
 
     def accept(topic: str, name: str) -> bool:
-        if name not in ("ImuBatch", "BeaconSighting"):
+        if name not in ("ImuBatch", "BeaconSighting", "StandScan"):
             return False
         return wanted is None or keys.parse(topic)[1] in wanted
 
@@ -100,10 +101,16 @@ def mcap_source(path: Path, agent_ids: str | set[str] | None, speed: float, stop
 def run_edge(config: zenoh.Config, session: Session, agent_id: str, source: Iterable[Any], stop: threading.Event,
              pose_rate_hz: float = 50.0, wait_for: int = 0, wait_timeout_s: float = 60.0,
              progress: Callable[[EdgeSummary], None] | None = None) -> EdgeSummary:
-    """Run one agent's edge (a chair or a swimmer) until the source ends or `stop` is set."""
+    """Run one agent's edge (a chair, a swimmer or a pedestrian's phone) until the source ends or
+    `stop` is set."""
     agent = session.agent(agent_id)
-    edge: ChairEdge | SwimEdge = (SwimEdge(agent, session.venue.court_length_m) if agent.kind is AgentKind.SWIMMER
-                                  else ChairEdge(agent, pose_rate_hz))
+    edge: ChairEdge | SwimEdge | PedestrianEdge
+    if agent.kind is AgentKind.SWIMMER:
+        edge = SwimEdge(agent, session.venue.court_length_m)
+    elif agent.kind is AgentKind.PEDESTRIAN:
+        edge = PedestrianEdge(agent, session.venue)
+    else:
+        edge = ChairEdge(agent, pose_rate_hz)
     venue = session.venue.name
     summary = EdgeSummary(agent_id, swimmer=isinstance(edge, SwimEdge))
     with open_session(config) as bus, Publisher(bus) as publisher, \
@@ -133,6 +140,10 @@ def run_edge(config: zenoh.Config, session: Session, agent_id: str, source: Iter
             if message.DESCRIPTOR.name == "ImuBatch":
                 publisher.publish(keys.imu(venue, agent_id, message.sensor_id), message)  # raw first: nothing lost
                 publish(edge.push(message))
+            elif message.DESCRIPTOR.name == "StandScan":
+                publisher.publish(keys.scan(venue, agent_id), message)  # refused ones too, with their reason
+                if isinstance(edge, PedestrianEdge):
+                    edge.scan(message)
             else:
                 publisher.publish(keys.beacon(venue, agent_id, message.sensor_id), message)
             if progress and summary.messages_in % 1000 == 0:
@@ -160,9 +171,13 @@ def _take_corrections(subscription: Subscription, edge: ChairEdge) -> None:
             edge.correct(message)
 
 
-def _summarise(summary: EdgeSummary, edge: ChairEdge | SwimEdge) -> EdgeSummary:
+def _summarise(summary: EdgeSummary, edge: ChairEdge | SwimEdge | PedestrianEdge) -> EdgeSummary:
     summary.samples = edge.samples
     if isinstance(edge, SwimEdge):
+        return summary
+    if isinstance(edge, PedestrianEdge):
+        summary.poses = edge.counters.steps
+        summary.final_pose = edge.last_pose
         return summary
     summary.poses, summary.impacts = edge.poses, edge.impacts
     summary.corrections = edge.corrections_applied
@@ -275,6 +290,10 @@ def open_sources(urls: list[str], agent_id: str, speed: float, stop: threading.E
         session = session_description(venue_toml) if venue_toml else read_description(path)
         _check_agent(session, agent_id, str(path))
         return session, mcap_source(path, agent_id, speed, stop, start_at)
+    if any(urlparse(url.partition("=")[2]).scheme == "phone" for url in urls):  # SENSOR=phone://HOST:PORT
+        from reckon.phone_server import open_phone_source
+
+        return open_phone_source(urls, agent_id, stop, venue_toml)
     serial, ble, scans = _live_specs(urls)
     if serial and ble:
         raise ConfigError(f"--source {ble[0][2]!r}: serial and BLE IMUs cannot be mixed on one chair (x-IMU3 "

@@ -1,7 +1,8 @@
 """`reckon hub`: the venue's hub over Zenoh. Every agent's streams in; corrected poses and corrections out.
 
 One subscription to the agents' input streams (a blocking queue: a slow hub slows the edges
-down, it never loses a measurement) feeds `hub.venue_hub.VenueHub` (chairs' corrections, camera identities) on one thread, in arrival order. Its
+down, it never loses a measurement) feeds `hub.venue_hub.VenueHub` (chairs' corrections, pedestrians' map matching, camera identities) on one
+thread, in arrival order. Its
 outputs go out at once: live poses on `reckon/<venue>/<agent>/pose/live`, refined ones on
 `.../pose/refined`, corrections to the edges on `.../correction`. A swimmer's lengths
 (`.../length`, from its edge) are recorded, logged as they come and totalled in the summary. With `output`, every input and
@@ -36,7 +37,7 @@ from reckon.bus import Alive, Publisher, Subscription, open_session
 
 log = logging.getLogger(__name__)
 POLL_S = 0.1
-INPUTS = ("imu/*", "beacon/*", "pose/edge", "event/impact", "fix", "length", "tracks/*")  # tracks: camera frames
+INPUTS = ("imu/*", "beacon/*", "pose/edge", "event/impact", "event/scan", "fix", "length", "tracks/*")  # tracks: camera frames
 WARN_EVERY_S = 10.0
 
 

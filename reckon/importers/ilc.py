@@ -282,6 +282,16 @@ def floor_plan_metres(geojson: dict[str, Any], width_m: float, height_m: float) 
     return plan
 
 
+def floor_centre_lonlat(geojson: dict[str, Any]) -> tuple[float, float]:
+    """(longitude, latitude) in degrees of the centre of the floor feature's bounding box."""
+    floors = [f for f in geojson.get("features", []) if _properties(f).get("type") == "floor"]
+    if len(floors) != 1:
+        raise InputError(f"floor plan: expected one feature with properties.type 'floor', found {len(floors)}")
+    corners = np.concatenate([np.array(ring) for polygon in _polygons(floors[0], "floor feature") for ring in polygon])
+    low, high = corners.min(axis=0), corners.max(axis=0)
+    return float(low[0] + high[0]) / 2.0, float(low[1] + high[1]) / 2.0
+
+
 def _properties(feature: Any) -> dict[str, Any]:
     properties = feature.get("properties") if isinstance(feature, dict) else None
     return properties if isinstance(properties, dict) else {}

@@ -4,7 +4,8 @@ One session per walk (each walk is its own recording): the phone's accelerometer
 magnetometer as ImuBatch messages (converted to protocol units: g, deg/s, gauss), every
 TYPE_WAYPOINT as a TruthPose (heading unknown: NaN), and the floor plan, when the walk lies in the
 competition's folder layout (`<site>/<floor>/path_data_files/<walk>.txt` beside `geojson_map.json`
-and `floor_info.json`), as the venue's walkable area in metres.
+and `floor_info.json`), as the venue's walkable area in metres, with the Earth's field there
+(reckon/importers/geomagnetic.py: the plan is in longitude/latitude, north up) for the magnetometer.
 
 The walks have no calibration stand. The first waypoint stands in for one, as the issue asks: a
 StandScan at the first waypoint's time and place, heading the bearing to the second waypoint.
@@ -24,7 +25,8 @@ import numpy as np
 from protocol import keys, messages
 from protocol.errors import InputError
 from protocol.session import session_from_dict
-from reckon.importers.ilc import IlcWalk, floor_plan_metres, read_ilc
+from reckon.importers.geomagnetic import venue_field
+from reckon.importers.ilc import IlcWalk, floor_centre_lonlat, floor_plan_metres, read_ilc
 from reckon.importers.tables import ImuArrays
 from reckon.importers.report import SensorCount
 from reckon.importers.writing import Stamped, imu_messages, truth_message, write_messages
@@ -32,6 +34,10 @@ from reckon.importers.writing import Stamped, imu_messages, truth_message, write
 AGENT_ID = "walker"
 SENSOR_ID = "phone"
 STANDARD_GRAVITY_MS2 = 9.80665
+# How far the bearing to the second waypoint may be from where the phone points: the surveyor's
+# path between waypoints 5-15 m apart curves, and a hand-held phone points up to about 10 deg off
+# the walking direction. An assumption, not a measurement; a real stand is known to about 3 deg.
+START_HEADING_SD_RAD = math.radians(15.0)
 START_NOTE = ("the first waypoint stands in for a calibration stand: position exact, heading the bearing to the "
               "second waypoint (an approximation)")
 
@@ -68,8 +74,10 @@ def walk_session(walk: IlcWalk, name: str, floor: tuple[dict, float, float] | No
     venue: dict = {"name": name}
     if floor is not None:
         geojson, width_m, height_m = floor
+        longitude_deg, latitude_deg = floor_centre_lonlat(geojson)
         venue.update(court_length_m=width_m, court_width_m=height_m,
-                     floor_plan=floor_plan_metres(geojson, width_m, height_m))
+                     floor_plan=floor_plan_metres(geojson, width_m, height_m),
+                     **venue_field(latitude_deg, longitude_deg, int(walk.time_ns[0])))
     return {
         "venue": venue,
         "agents": [{"id": AGENT_ID, "kind": "pedestrian",
@@ -86,7 +94,8 @@ def start_scan(walk: IlcWalk, venue: str) -> Stamped:
     time_ns = int(walk.waypoint_time_ns[0])
     message = messages.new("StandScan", timestamp_ns=time_ns, agent_id=AGENT_ID, sensor_id=SENSOR_ID,
                            stand_id="waypoint-1", x_m=float(x0), y_m=float(y0), floor=0,
-                           heading_rad=math.atan2(y1 - y0, x1 - x0), tilt_rad=0.0, payload=START_NOTE,
+                           heading_rad=math.atan2(y1 - y0, x1 - x0), heading_sd_rad=START_HEADING_SD_RAD,
+                           tilt_rad=0.0, payload=START_NOTE,
                            accepted=True, reason="")
     return time_ns, keys.scan(venue, AGENT_ID), message
 

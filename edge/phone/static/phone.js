@@ -1,0 +1,135 @@
+// reckon's phone page: DeviceMotion / DeviceOrientation samples and QR stand scans to the edge over
+// a WebSocket (message formats: docs/phone.md). Samples are kept while the socket is down and sent
+// when it is back, up to MAX_HELD (then the oldest go, counted on the page), so a short Wi-Fi drop
+// loses nothing.
+"use strict";
+
+const SEND_EVERY_MS = 100;        // one JSON batch per 100 ms: ~6-10 samples at a phone's 60-100 Hz
+const MAX_HELD = 60 * 100;        // 60 s at 100 Hz while disconnected
+const SCAN_EVERY_MS = 200;        // jsQR on a 640x480 frame takes ~20-50 ms on a phone
+const SAME_CODE_AGAIN_MS = 5000;  // the same code seen again within this is not sent again
+const RECONNECT_MS = 1000;
+
+const state = { socket: null, motion: [], orientation: [], sent: 0, heldDropped: 0, noData: 0,
+                lastText: "", lastTextAt: -Infinity, started: false };
+const $ = (id) => document.getElementById(id);
+
+// The phone's own clock in epoch ms with sub-ms resolution: event.timeStamp counts from timeOrigin.
+const eventTime = (event) => performance.timeOrigin + event.timeStamp;
+const nowTime = () => performance.timeOrigin + performance.now();
+
+function show(id, text, cls) {
+  const el = $(id);
+  el.textContent = text;
+  el.className = cls || "";
+}
+
+function connect() {
+  const socket = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`);
+  socket.onopen = () => {
+    state.socket = socket;
+    document.body.dataset.state = "connected";
+    show("connection", "connected", "ok");
+    socket.send(JSON.stringify({ type: "hello", userAgent: navigator.userAgent }));
+  };
+  socket.onmessage = (event) => {
+    const reply = JSON.parse(event.data);
+    if (typeof reply.samples === "number") show("taken", String(reply.samples));
+    if (reply.problem || reply.type === "problem") show("problem", reply.problem || reply.text, "bad");
+    if (reply.type === "scan_result") {
+      const text = reply.accepted ? `accepted: stand ${reply.stand_id}` : `refused: ${reply.reason}`;
+      show("scan", text, reply.accepted ? "ok" : "bad");
+      document.body.dataset.lastScan = reply.accepted ? "accepted" : "refused";
+    }
+  };
+  socket.onclose = () => {
+    state.socket = null;
+    document.body.dataset.state = "disconnected";
+    show("connection", "not connected: retrying", "bad");
+    setTimeout(connect, RECONNECT_MS);
+  };
+}
+
+function hold(list, row) {
+  list.push(row);
+  if (list.length > MAX_HELD) { list.shift(); state.heldDropped += 1; }
+}
+
+function onMotion(event) {
+  const a = event.accelerationIncludingGravity, r = event.rotationRate;
+  // Desktop browsers fire events without sensors; nothing to send then.
+  if (!a || !r || a.x === null || r.alpha === null) { state.noData += 1; return; }
+  hold(state.motion, [eventTime(event), a.x, a.y, a.z, r.alpha, r.beta, r.gamma, event.interval]);
+}
+
+function onOrientation(event) {
+  if (event.alpha === null && event.beta === null) return;
+  hold(state.orientation, [eventTime(event), event.alpha, event.beta, event.gamma, event.absolute ? 1 : 0]);
+}
+
+function flush() {
+  const socket = state.socket;
+  if (!socket || socket.readyState !== WebSocket.OPEN) return;
+  if (state.motion.length) {
+    socket.send(JSON.stringify({ type: "motion", samples: state.motion }));
+    state.sent += state.motion.length;
+    state.motion = [];
+    show("sent", String(state.sent) + (state.heldDropped ? ` (${state.heldDropped} lost offline)` : ""));
+  }
+  if (state.orientation.length) {
+    socket.send(JSON.stringify({ type: "orientation", samples: state.orientation }));
+    state.orientation = [];
+  }
+  if (state.noData && !state.sent) show("problem", "this browser gives no motion sensor data", "bad");
+}
+
+function sendScan(text) {
+  const now = nowTime();
+  if (text === state.lastText && now - state.lastTextAt < SAME_CODE_AGAIN_MS) return;
+  state.lastText = text;
+  state.lastTextAt = now;
+  show("scan", `sent: ${text}`);
+  if (state.socket) state.socket.send(JSON.stringify({ type: "scan", t: now, text: text }));
+}
+
+async function startCamera() {
+  if (!navigator.mediaDevices || !navigator.mediaDevices.getUserMedia) {
+    show("scan", "no camera here (needs HTTPS)", "bad");
+    return;
+  }
+  const video = $("camera"), canvas = $("frame");
+  const stream = await navigator.mediaDevices.getUserMedia({ video: { facingMode: "environment" }, audio: false });
+  video.srcObject = stream;
+  await video.play();
+  const context = canvas.getContext("2d", { willReadFrequently: true });
+  setInterval(() => {
+    if (!video.videoWidth) return;
+    canvas.width = video.videoWidth;
+    canvas.height = video.videoHeight;
+    context.drawImage(video, 0, 0);
+    const image = context.getImageData(0, 0, canvas.width, canvas.height);
+    const code = jsQR(image.data, image.width, image.height, { inversionAttempts: "dontInvert" });
+    if (code && code.data) sendScan(code.data);
+  }, SCAN_EVERY_MS);
+}
+
+async function start() {
+  if (state.started) return;
+  // iOS asks for motion permission only from a user gesture (this click); others have no such call.
+  for (const type of [window.DeviceMotionEvent, window.DeviceOrientationEvent]) {
+    if (type && typeof type.requestPermission === "function") {
+      const answer = await type.requestPermission();
+      if (answer !== "granted") { show("problem", "motion permission refused: allow it in Settings", "bad"); return; }
+    }
+  }
+  state.started = true;
+  $("start").disabled = true;
+  window.addEventListener("devicemotion", onMotion);
+  window.addEventListener("deviceorientation", onOrientation);
+  setInterval(flush, SEND_EVERY_MS);
+  document.body.dataset.started = "yes";
+  try { await startCamera(); } catch (error) { show("scan", `camera: ${error.message}`, "bad"); }
+}
+
+$("start").addEventListener("click", start);
+connect();

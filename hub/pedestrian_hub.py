@@ -1,0 +1,106 @@
+"""The hub's part for pedestrians: each one's dead-reckoned steps through a map matcher.
+
+Per pedestrian agent with a map (the venue's floor plan, or corridors between its map points:
+hub/walkable.py), every edge pose (EstimatedPose on `pose/edge`, per step) goes through the
+matcher and leaves as the corrected `pose/live`. Without a map the edge pose is passed on as it is.
+
+A stand reset is read from the pose itself: the edge counts its stand resets in
+`correction_sequence`, so the first pose with a higher count restarts the matcher at that pose
+(within a step of the stand, at the stand's accuracy) even if the StandScan message, which comes
+on its own key, arrives later. A pose not later than the agent's last one is dropped and counted.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from hub.map_matching import DeadReckonedPose, MapMatcher
+from hub.map_particles import ParticleMatcher, ParticleSettings
+from hub.walkable import WalkableArea
+from protocol import keys, messages
+from protocol.session import AgentKind, Session, Venue
+
+METHOD = "reckon"
+SNAPS_KEPT = 1024  # a 4-minute walk over the paper's map makes about 20 snap decisions
+
+
+@dataclass
+class PedestrianView:
+    agent_id: str
+    matcher: MapMatcher | None
+    resets: int = 0
+    last_time_ns: int = -1
+    poses: int = 0
+    out_of_order: int = 0
+    matched: int = 0  # poses that went through the matcher
+    snaps: deque = field(default_factory=lambda: deque(maxlen=SNAPS_KEPT))  # the paper's snap decisions, newest
+
+
+def particle_matcher_factory(venue: Venue) -> Callable[[str], MapMatcher] | None:
+    """Our matcher for each pedestrian, or None when the venue has no map. The walkable area is
+    built once and shared; each agent's filter has its own seed (agent order)."""
+    if not venue.floor_plan and not venue.map_points:
+        return None
+    area = WalkableArea.from_venue(venue)
+    seeds: dict[str, int] = {}
+
+    def make(agent_id: str) -> MapMatcher:
+        seed = seeds.setdefault(agent_id, len(seeds))
+        return ParticleMatcher(area, ParticleSettings(seed=seed))
+
+    return make
+
+
+class PedestrianHub:
+    """`on_message(message) -> outputs` (EstimatedPose, track LIVE), `key_for(output)`."""
+
+    def __init__(self, session: Session, matcher_factory: Callable[[str], MapMatcher] | None | str = "particles",
+                 method: str = METHOD):
+        self.venue = session.venue.name
+        factory = particle_matcher_factory(session.venue) if matcher_factory == "particles" else matcher_factory
+        self.method = method
+        self.agents = {agent.id: PedestrianView(agent.id, factory(agent.id) if callable(factory) else None)
+                       for agent in session.agents if agent.kind is AgentKind.PEDESTRIAN}
+
+    def on_message(self, message: Any) -> list[Any]:
+        if messages.type_name(message) != "EstimatedPose":
+            return []
+        view = self.agents.get(message.agent_id)
+        if view is None:
+            return []
+        if message.timestamp_ns <= view.last_time_ns:
+            view.out_of_order += 1
+            return []
+        view.last_time_ns = message.timestamp_ns
+        view.poses += 1
+        covariance = np.asarray(message.covariance, dtype=float).reshape(3, 3) if len(message.covariance) == 9 else None
+        if view.matcher is None:
+            return [self._pose(message.agent_id, message.timestamp_ns, message.x_m, message.y_m, message.heading_rad,
+                               covariance, message.correction_sequence)]
+        if message.correction_sequence != view.resets:
+            view.resets = message.correction_sequence
+            view.matcher.reset(message.timestamp_ns, message.x_m, message.y_m, message.heading_rad)
+            return [self._pose(message.agent_id, message.timestamp_ns, message.x_m, message.y_m, message.heading_rad,
+                               covariance, message.correction_sequence)]
+        matched = view.matcher.update(DeadReckonedPose(message.timestamp_ns, message.x_m, message.y_m,
+                                                       message.heading_rad, covariance))
+        view.matched += 1
+        if matched.snap is not None:
+            view.snaps.append(matched.snap)
+        return [self._pose(message.agent_id, matched.time_ns, matched.x_m, matched.y_m, matched.heading_rad,
+                           matched.covariance, message.correction_sequence)]
+
+    def _pose(self, agent_id: str, time_ns: int, x_m: float, y_m: float, heading_rad: float,
+              covariance: np.ndarray | None, sequence: int) -> Any:
+        values = [] if covariance is None else np.asarray(covariance, dtype=float).ravel().tolist()
+        return messages.new("EstimatedPose", timestamp_ns=time_ns, agent_id=agent_id, x_m=x_m, y_m=y_m,
+                            heading_rad=math.remainder(heading_rad, 2.0 * math.pi), covariance=values,
+                            method=self.method, track=messages.Track.LIVE, correction_sequence=sequence)
+
+    def key_for(self, message: Any) -> str:
+        return keys.pose(self.venue, message.agent_id, "live")
