@@ -39,6 +39,12 @@ class PedestrianView:
     out_of_order: int = 0
     matched: int = 0  # poses that went through the matcher
     snaps: deque = field(default_factory=lambda: deque(maxlen=SNAPS_KEPT))  # the paper's snap decisions, newest
+    last: tuple[float, float] | None = None  # the last pose out (x m, y m)
+
+    def describe(self) -> str:
+        where = "none" if self.last is None else f"x {self.last[0]:.2f} m, y {self.last[1]:.2f} m"
+        return (f"{self.poses} poses, {self.resets} stand resets, {self.out_of_order} out of order; "
+                f"last {where}")
 
 
 def particle_matcher_factory(venue: Venue) -> Callable[[str], MapMatcher] | None:
@@ -79,12 +85,11 @@ class PedestrianHub:
         view.last_time_ns = message.timestamp_ns
         view.poses += 1
         covariance = np.asarray(message.covariance, dtype=float).reshape(3, 3) if len(message.covariance) == 9 else None
-        if view.matcher is None:
-            return [self._pose(message.agent_id, message.timestamp_ns, message.x_m, message.y_m, message.heading_rad,
-                               covariance, message.correction_sequence)]
-        if message.correction_sequence != view.resets:
-            view.resets = message.correction_sequence
-            view.matcher.reset(message.timestamp_ns, message.x_m, message.y_m, message.heading_rad)
+        restarted = message.correction_sequence != view.resets
+        view.resets = message.correction_sequence
+        if view.matcher is None or restarted:
+            if view.matcher is not None:
+                view.matcher.reset(message.timestamp_ns, message.x_m, message.y_m, message.heading_rad)
             return [self._pose(message.agent_id, message.timestamp_ns, message.x_m, message.y_m, message.heading_rad,
                                covariance, message.correction_sequence)]
         matched = view.matcher.update(DeadReckonedPose(message.timestamp_ns, message.x_m, message.y_m,
@@ -97,6 +102,7 @@ class PedestrianHub:
 
     def _pose(self, agent_id: str, time_ns: int, x_m: float, y_m: float, heading_rad: float,
               covariance: np.ndarray | None, sequence: int) -> Any:
+        self.agents[agent_id].last = (x_m, y_m)
         values = [] if covariance is None else np.asarray(covariance, dtype=float).ravel().tolist()
         return messages.new("EstimatedPose", timestamp_ns=time_ns, agent_id=agent_id, x_m=x_m, y_m=y_m,
                             heading_rad=math.remainder(heading_rad, 2.0 * math.pi), covariance=values,

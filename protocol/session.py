@@ -280,7 +280,11 @@ def _sensor(data: dict[str, Any], where: str) -> Sensor:
     if sensor.mount.on_wheel and sensor.spin_axis is None:
         raise ConfigError(f"{where}: a {sensor.mount.value} sensor needs spin_axis (one of {', '.join(AXES)})")
     if not sensor.mount.on_wheel:
-        forward, left = sensor.forward_axis or "+x", sensor.left_axis or "+y"
+        # A phone's own axes (Android: x right, y to the top of the screen, z out of it): held flat
+        # in front, the top points where its holder walks. Other mounts name their axes, or x/y.
+        phone = sensor.mount in (Mount.HAND, Mount.POCKET)
+        forward = sensor.forward_axis or ("+y" if phone else "+x")
+        left = sensor.left_axis or ("-x" if phone else "+y")
         if forward[1] == left[1]:
             raise ConfigError(f"{where}: forward_axis {forward} and left_axis {left} must be different axes")
         sensor = dataclasses.replace(sensor, forward_axis=forward, left_axis=left)

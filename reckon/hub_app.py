@@ -51,6 +51,7 @@ class HubSummary:
     skipped: int = 0
     full_waits: int = 0
     swims: dict[str, SwimTotals] = field(default_factory=dict)  # sensor -> its lengths so far
+    walkers: dict[str, str] = field(default_factory=dict)  # pedestrian -> its map-matched poses and the last one
 
     def __str__(self) -> str:
         total = sum(sum(kinds.values()) for kinds in self.corrections.values())
@@ -58,6 +59,8 @@ class HubSummary:
                 f"({self.pairs} collision pairs), {self.skipped} samples skipped, queue full {self.full_waits} times")
         for sensor_id, swim in sorted(self.swims.items()):
             text += f"\n  {sensor_id}: {swim}"
+        for agent_id, line in sorted(self.walkers.items()):
+            text += f"\n  {agent_id}: {line}"
         return text
 
 
@@ -149,4 +152,5 @@ def run_hub(config: zenoh.Config, session: Session, stop: threading.Event, setti
         summary.full_waits = subscription.stats.full_waits
     summary.corrections = {view.agent_id: dict(view.applied) for view in hub.agents.values()}
     summary.pairs = hub.counters.pairs
+    summary.walkers = {view.agent_id: view.describe() for view in hub.pedestrians.agents.values() if view.poses}
     return summary

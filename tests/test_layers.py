@@ -8,7 +8,9 @@ import sys
 
 CORES = ["edge.chair_estimator", "edge.chair_merger", "edge.wheel", "edge.paper_dr", "edge.impacts", "edge.mag_heading",
          "edge.mounting", "edge.decoders", "hub.paper_rules", "hub.chair_corrections", "hub.track_paper",
-         "protocol.messages", "protocol.stand_code",
+         "protocol.messages", "protocol.stand_code", "edge.pdr", "edge.pdr_steps", "edge.pdr_magnetic",
+         "edge.pdr_paper", "edge.pdr_edge", "hub.pedestrian_hub", "hub.map_particles", "hub.map_snap_paper",
+         "hub.walkable",
          "protocol.keys", "protocol.session", "protocol.bus"]
 FORBIDDEN = {"zenoh", "serial", "bleak", "mcap", "mcap_protobuf", "asyncio", "socket", "matplotlib"}
 

@@ -144,6 +144,7 @@ def read_inputs(path: Path) -> list[Any]:
 def evaluate_pedestrians(sessions: list[tuple[SessionData, Path]],
                          progress: Callable[[str], None] = lambda _: None) -> PedestrianReport:
     report = PedestrianReport([str(path) for _, path in sessions])
+    no_points: list[str] = []
     for data, path in sessions:
         report.problems += data.problems
         missing = [a.id for a in data.session.agents if a.id not in data.truth]
@@ -158,9 +159,11 @@ def evaluate_pedestrians(sessions: list[tuple[SessionData, Path]],
                 matcher = "turn snap" if method == "paper" else "particle filter"
                 report.rows.append(score(data, path, run, run.hub, True, matcher))
             elif method == "paper":
-                note = f"{path.name}: no corridor map points: the paper's turn snap has nothing to snap to"
-                if note not in report.problems:
-                    report.problems.append(note)
+                no_points.append(path.name)
+    if no_points:
+        report.problems.append(f"{len(no_points)} of {len(sessions)} sessions have no corridor map points: the "
+                               f"paper's turn snap has nothing to snap to there ({', '.join(no_points[:3])}"
+                               f"{', ...' if len(no_points) > 3 else ''})")
     return report
 
 
