@@ -10,8 +10,9 @@ rad/s, magnetometer uT, in the phone frame (x right, y to the top of the screen,
   amplitudes, bounded to [k_min, k_max] and smoothed).
 - Walking direction: the heading of the device's forward axis (settings.forward_axis, +y for a
   phone held flat in front), averaged over the step as a unit vector (the body sways +-5 deg
-  within a stride), plus `walking_offset_rad`: 0 in the hand; learned from the horizontal
-  acceleration's principal axis (edge/pdr_direction.py) for a phone in a pocket or swinging.
+  within a stride). With `direction_from_acceleration` (a pocket), plus the walking direction
+  relative to that axis, read from the horizontal acceleration (edge/pdr_direction.py: principal
+  axis, sign from the gait) in a frame turning with the phone, so the gyro still carries turns.
 - Magnetometer: a gated aid only (the paper found it unusable on upper floors): edge/pdr_magnetic.py.
 - Uncertainty: a 3x3 covariance over (x, y, heading), propagated per step through the motion's
   Jacobian with along-track (step length) and heading (gyro drift, scale) noise.
@@ -30,11 +31,13 @@ from dataclasses import dataclass, field
 import imufusion
 import numpy as np
 
-from edge import pdr_steps
+from edge import pdr_direction, pdr_steps
+from edge.pdr_direction import DirectionSettings, DirectionState
 from edge.pdr_magnetic import MagneticAid, MagneticSettings, VenueField
 from edge.pdr_steps import StepSettings, StepState
 
 DEGREES_PER_RADIAN = 180.0 / math.pi
+STAND_AXIS = np.array([0.0, 1.0, 0.0])  # a stand's corner holds the phone flat, its top (+y) at the stand's heading
 STANDARD_GRAVITY_MS2 = 9.80665
 
 
@@ -71,11 +74,22 @@ class PdrSettings:
     bias_threshold_dps: float = 3.0  # Fusion offset algorithm: still below this ...
     bias_period_s: float = 3.0  # ... for this long
     forward_axis: tuple[float, float, float] = (0.0, 1.0, 0.0)  # phone flat in front: the top of the screen
-    step_gain_m: float = 0.38  # K (m per Weinberg unit): tuned on ILC walks 1-3 (docs/pdr-estimator.md)
+    # Where a step goes: False: the heading of forward_axis (a phone held in front); True:
+    # forward_axis's heading plus the walking direction relative to it, read from the acceleration
+    # (edge/pdr_direction.py, in a frame turning with the phone: a pocket, however it sits).
+    direction_from_acceleration: bool = False
+    direction: DirectionSettings = field(default_factory=DirectionSettings)
+    # Extra per-step heading noise when the direction is read from the acceleration (its spread
+    # between steps, and the sign's chance to be wrong, are larger than a held phone's axis).
+    direction_heading_sd_rad: float = 0.05
+    # K (m per Weinberg unit): 0.38 from ILC walks 1-3 (docs/pdr-estimator.md) left walks 1-5 about
+    # 14 % short; 0.43 is the best of 0.38-0.46 on walks 1-5. Re-learned per user between stands.
+    step_gain_m: float = 0.43
     step_gain_min_m: float = 0.25  # bounds of a learned K: steps 0.35-1.0 m for typical amplitudes
     step_gain_max_m: float = 0.6
     step_gain_smoothing: float = 0.5  # weight of a newly learned K against the previous one
     step_gain_min_sum: float = 10.0  # learn K only over this many Weinberg units (about 10 steps)
+    step_gain_min_displacement_m: float = 10.0  # ... and stands this far apart (a 3 deg heading error is 5 %)
     step_length_sd_fraction: float = 0.08  # per-step length error (Weinberg: ~8 % of distance)
     heading_drift_sd_rad_per_sqrt_s: float = 0.004  # residual gyro bias, walking sway
     gyro_scale_sd: float = 0.01  # heading error per radian turned (phone gyro scale)
@@ -124,6 +138,7 @@ class PdrEstimator:
                                                       stationary_threshold=settings.bias_threshold_dps,
                                                       stationary_period=settings.bias_period_s))
         self.forward = np.array(settings.forward_axis, dtype=float)
+        self.direction = DirectionState()
         self.time_ns = -1
         self.x_m = self.y_m = 0.0
         self.heading_offset_rad = 0.0
@@ -140,10 +155,14 @@ class PdrEstimator:
 
     def device_heading_rad(self, rotation: np.ndarray | None = None) -> float:
         """Heading of the forward axis in Fusion's earth frame (counter-clockwise about up)."""
+        return self.axis_heading_rad(self.forward, rotation)
+
+    def axis_heading_rad(self, axis: np.ndarray, rotation: np.ndarray | None = None) -> float:
+        """Heading of a phone axis in Fusion's earth frame (counter-clockwise about up)."""
         if rotation is None:
             rotation = imufusion.quaternion_to_matrix(self.ahrs.get_quaternion())
-        forward = rotation @ self.forward
-        return math.atan2(forward[1], forward[0])
+        pointing = rotation @ axis
+        return math.atan2(pointing[1], pointing[0])
 
     def step(self, sample: PhoneSample) -> list[PdrStep]:
         """Feed one sample; returns the step completed by it (at most one)."""
@@ -174,12 +193,17 @@ class PdrEstimator:
         self.turn_since_step_rad += abs(wrap(heading - self.last_heading_rad))
         self.last_heading_rad = heading
         self.direction_sum += (math.cos(heading), math.sin(heading))
+        if self.settings.direction_from_acceleration:
+            linear = rotation @ np.asarray(sample.accel_ms2, dtype=float)
+            linear[2] -= STANDARD_GRAVITY_MS2
+            self.direction = pdr_direction.step(self.settings.direction, self.direction, sample.time_ns,
+                                                (float(linear[0]), float(linear[1]), float(linear[2])), heading)
         self.steps, event = pdr_steps.step(self.settings.steps, self.steps, sample.time_ns, sample.accel_ms2)
         return [] if event is None else [self._advance(event)]
 
     def _advance(self, event: pdr_steps.StepEvent) -> PdrStep:
         settings = self.settings
-        heading = math.atan2(self.direction_sum[1], self.direction_sum[0]) + self.heading_offset_rad
+        heading = self._step_direction_rad() + self.heading_offset_rad
         length = self.step_gain_m * event.weinberg
         self.weinberg_since_stand += event.weinberg
         cos_h, sin_h = math.cos(heading), math.sin(heading)
@@ -191,6 +215,8 @@ class PdrEstimator:
                        + (settings.gyro_scale_sd * self.turn_since_step_rad) ** 2)
         noise = (settings.step_length_sd_fraction * length) ** 2 * np.outer(along, along)
         noise[2, 2] += heading_var
+        if settings.direction_from_acceleration:
+            noise[2, 2] += settings.direction_heading_sd_rad ** 2
         self.covariance = jacobian @ self.covariance @ jacobian.T + noise
         self.direction_sum[:] = 0.0
         self.turn_since_step_rad = 0.0
@@ -199,6 +225,15 @@ class PdrEstimator:
             if measured is not None and self.stand is not None:
                 heading += self._magnetic_update(self.magnetic, measured)
         return PdrStep(event.time_ns, self.x_m, self.y_m, wrap(heading), length, self.covariance.copy(), event.count)
+
+    def _step_direction_rad(self) -> float:
+        """The step's direction in Fusion's frame: the forward axis's heading averaged over the step,
+        or from the acceleration (pdr_direction); the forward axis while that has nothing to read."""
+        axis = math.atan2(self.direction_sum[1], self.direction_sum[0])
+        if self.settings.direction_from_acceleration:
+            offset = pdr_direction.offset_rad(self.settings.direction, self.direction)
+            return axis if offset is None else axis + offset
+        return axis
 
     def _magnetic_update(self, magnetic: MagneticAid, measured_offset_rad: float) -> float:
         """Kalman update of (x, y, heading) by one step's magnetic offset measurement: the
@@ -219,29 +254,38 @@ class PdrEstimator:
 
     def reset_to_stand(self, time_ns: int, x_m: float, y_m: float, heading_rad: float,
                        tilt_rad: float | None = 0.0, heading_sd_rad: float | None = None) -> None:
-        """A calibration stand scan: the phone lies on the stand at (x_m, y_m), its forward axis at
+        """A calibration stand scan: the phone lies on the stand at (x_m, y_m), its top (+y) at
         `heading_rad` (known to `heading_sd_rad`; None or 0: a real stand's stand_heading_sd_rad),
         tilted `tilt_rad` about its x axis (None: keep the AHRS's own tilt).
-        With a previous stand known, K is re-learned from the distance between the two stands
-        over the Weinberg amplitudes summed since (bounded, smoothed; skipped below
-        step_gain_min_sum: too few steps to tell K from noise)."""
+        With a previous stand known, K is re-learned from the surveyed displacement between the
+        two stands over the dead-reckoned one (bounded, smoothed; skipped below step_gain_min_sum
+        Weinberg units or step_gain_min_displacement_m: too little to tell K from noise)."""
         settings = self.settings
         if self.time_ns < 0:
             self.pending_stand = (time_ns, x_m, y_m, heading_rad, tilt_rad, heading_sd_rad)
             return
         if self.stand is not None and self.weinberg_since_stand >= settings.step_gain_min_sum:
-            walked_m = math.hypot(x_m - self.stand[0], y_m - self.stand[1])
-            learned = min(max(walked_m / self.weinberg_since_stand, settings.step_gain_min_m), settings.step_gain_max_m)
-            self.step_gain_m += settings.step_gain_smoothing * (learned - self.step_gain_m)
+            # The surveyed displacement between the stands over the dead-reckoned one: the walk
+            # between them need not be straight (a route through corridors), only the heading good.
+            surveyed_m = math.hypot(x_m - self.stand[0], y_m - self.stand[1])
+            reckoned_m = math.hypot(self.x_m - self.stand[0], self.y_m - self.stand[1])
+            if min(surveyed_m, reckoned_m) >= settings.step_gain_min_displacement_m:
+                learned = min(max(self.step_gain_m * surveyed_m / reckoned_m, settings.step_gain_min_m),
+                              settings.step_gain_max_m)
+                self.step_gain_m += settings.step_gain_smoothing * (learned - self.step_gain_m)
         if tilt_rad is not None:
-            yaw = self.device_heading_rad() - math.atan2(self.forward[1], self.forward[0])
+            yaw = self.axis_heading_rad(STAND_AXIS) - math.pi / 2.0  # the levelled phone's +y at yaw + 90 deg
             self.ahrs.set_quaternion(quaternion_multiply(axis_angle(2, yaw), axis_angle(0, tilt_rad)))
-        self.heading_offset_rad = wrap(heading_rad - self.device_heading_rad())
+        # The stand holds the phone's top at heading_rad, whatever axis the phone walks along later
+        # (a pocket: its screen's normal); the gyro carries the frame from the stand into the pocket.
+        self.heading_offset_rad = wrap(heading_rad - self.axis_heading_rad(STAND_AXIS))
         self.x_m, self.y_m = x_m, y_m
         self.stand = (x_m, y_m)
         self.weinberg_since_stand = 0.0
         self.direction_sum[:] = 0.0
         self.turn_since_step_rad = 0.0
+        # The phone left its mount for the stand: how it sits when it goes back is unknown.
+        self.direction = DirectionState()
         heading_sd = heading_sd_rad if heading_sd_rad else settings.stand_heading_sd_rad
         self.covariance = np.diag([settings.stand_position_sd_m ** 2, settings.stand_position_sd_m ** 2, heading_sd ** 2])
 

@@ -23,7 +23,7 @@ import numpy as np
 from edge.pdr import PdrEstimator, PdrSettings, PdrStep, PhoneSample
 from edge.pdr_magnetic import VenueField
 from protocol import messages
-from protocol.session import Agent, Venue
+from protocol.session import Agent, Mount, Sensor, Venue
 
 STANDARD_GRAVITY_MS2 = 9.80665
 UT_PER_GAUSS = 100.0
@@ -51,13 +51,17 @@ class PedestrianEdge:
     """`push(ImuBatch) -> [EstimatedPose]`, `scan(StandScan)`, `flush()`."""
 
     def __init__(self, agent: Agent, venue: Venue | None = None, estimator: DeadReckoning | None = None,
-                 method: str = METHOD):
-        """Our dead reckoning unless `estimator` is given; with the venue's Earth field stated
+                 method: str = METHOD, sensor_id: str | None = None):
+        """The agent's phone `sensor_id` (default its first sensor: one edge per device); our dead
+        reckoning unless `estimator` is given; with the venue's Earth field stated
         (`venue.magnetic_*`), its magnetometer aid is on."""
-        phone = next((s for s in agent.sensors), None)
+        phone = next((s for s in agent.sensors if sensor_id is None or s.id == sensor_id), None)
+        if phone is None:
+            raise ValueError(f"agent {agent.id} has no sensor {sensor_id!r}")
         self.agent_id = agent.id
-        self.sensor_id = phone.id if phone is not None else ""
-        self.estimator = estimator if estimator is not None else PdrEstimator(_settings_for(agent), venue_field(venue))
+        self.sensor_id = phone.id
+        self.mount = phone.mount
+        self.estimator = estimator if estimator is not None else PdrEstimator(_settings_for(phone), venue_field(venue))
         self.method = method
         self.resets = 0
         self.last_pose: tuple[float, float, float] | None = None  # x m, y m, heading rad of the last step out
@@ -83,6 +87,8 @@ class PedestrianEdge:
         return out
 
     def scan(self, scan: Any) -> None:
+        if scan.sensor_id and scan.sensor_id != self.sensor_id:  # the agent's other phone
+            return
         if not scan.accepted:
             self.counters.scans_refused += 1
             return
@@ -106,12 +112,13 @@ AXES = {"+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0), "+y": (0.0, 1.0, 0.0), "-
         "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0)}
 
 
-def _settings_for(agent: Agent) -> PdrSettings:
-    """Our settings for the agent's phone: its forward axis from the session (default +y, the
-    top of a phone held flat in front)."""
-    phone = next(iter(agent.sensors), None)
-    forward = AXES.get(phone.forward_axis or "+y", AXES["+y"]) if phone is not None else AXES["+y"]
-    return PdrSettings(forward_axis=forward)
+def _settings_for(phone: Sensor) -> PdrSettings:
+    """Our settings for a phone: its forward axis from the session (a phone's default is +y, the
+    top of a phone held flat in front; in a pocket, the screen's normal, +z or -z). In a pocket the
+    session's axis is only how the phone sat at first (its sign and its angle change each time it
+    is put back), so the walking direction relative to it is read from the acceleration."""
+    return PdrSettings(forward_axis=AXES[phone.forward_axis or "+y"],
+                       direction_from_acceleration=phone.mount is Mount.POCKET)
 
 
 def venue_field(venue: Venue | None) -> VenueField | None:

@@ -155,6 +155,10 @@ class PaperPdrState:
     backwards: int
     nonfinite: int
     near_gimbal_lock: int
+    relevelled: int  # attitude blown up through gimbal lock: roll and pitch taken from gravity again
+
+
+ATTITUDE_VARIANCE_LIMIT = 100.0  # rad^2: far past any meaningful roll/pitch uncertainty
 
 
 class PaperPdr:
@@ -185,7 +189,7 @@ class PaperPdr:
         self.last_output_ns = 0
         self.distance_since_output_m = 0.0
         self.turn_since_output_rad = 0.0
-        self.outputs = self.gaps = self.backwards = self.nonfinite = self.near_gimbal_lock = 0
+        self.outputs = self.gaps = self.backwards = self.nonfinite = self.near_gimbal_lock = self.relevelled = 0
 
     # -- speed (section 3.1, eq. 1-2) -------------------------------------------------------------
     def _speed(self, cadence_hz: float) -> float:
@@ -269,7 +273,16 @@ class PaperPdr:
                              [g * sin_r * cos_p, g * cos_r * sin_p]])
         covariance = self.attitude_covariance
         innovation_cov = jacobian @ covariance @ jacobian.T + self.settings.accel_noise_sd_ms2 ** 2 * np.eye(3)
-        gain = np.linalg.solve(innovation_cov, jacobian @ covariance).T
+        try:
+            if not (np.all(np.abs(covariance) < ATTITUDE_VARIANCE_LIMIT) and math.isfinite(self.roll_rad + self.pitch_rad)):
+                raise np.linalg.LinAlgError("attitude diverged")
+            gain = np.linalg.solve(innovation_cov, jacobian @ covariance).T
+        except np.linalg.LinAlgError:
+            # Through gimbal lock (a phone upright in a pocket) eq. 5's tan(pitch) blows the attitude
+            # up: the paper's method has no answer; start roll and pitch again from gravity, counted.
+            self.relevelled += 1
+            self._level_from_gravity(accel_frd)
+            return
         correction = gain @ (np.asarray(accel_frd) - predicted)
         self.roll_rad = wrap(self.roll_rad + float(correction[0]))
         self.pitch_rad += float(correction[1])
@@ -374,4 +387,4 @@ class PaperPdr:
                              self.pitch_rad, self.yaw_rad, self.attitude_covariance.copy(),
                              wrap(self.raw_heading_rad), self.cadence_hz, self.peak_amplitude_ms2, self.speed_m_s,
                              self.window_fill, self.covariance.copy(), self.outputs, self.gaps, self.backwards,
-                             self.nonfinite, self.near_gimbal_lock)
+                             self.nonfinite, self.near_gimbal_lock, self.relevelled)

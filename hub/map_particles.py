@@ -16,7 +16,9 @@ everything the filter had learned; the spread doubles per attempt until walkable
 and the recovery is counted. No turns are needed: a junction is just where the corridors let the
 cloud through. The output is the weighted mean, unless it lies in a wall or the move to it from
 the last output crosses one (a cloud split by a wall): then the densest cell's most central
-particle, which is walkable by construction. Work per pose is O(particles x L / cell); memory is
+particle, which is walkable by construction. For phones whose heading has an absolute aid (the
+hub's PHONE_PARTICLES) the offsets also revert to the dead reckoning's own (`offset_reversion_s`).
+Work per pose is O(particles x L / cell); memory is
 the fixed particle arrays. Random numbers come from one seeded generator.
 """
 
@@ -38,6 +40,8 @@ class ParticleSettings:
     along_noise_m_per_sqrt_m: float = 0.05  # 0.04 m on a 0.7 m step: 6 %, Weinberg step-length scatter
     cross_noise_m_per_sqrt_m: float = 0.08  # 0.07 m on a 0.7 m step: about 5 deg of sway per step
     offset_walk_rad_per_sqrt_s: float = math.radians(0.6)  # 4.6 deg after a minute: gyro drift and grip changes
+    # None: the offsets only random-walk. A time constant: they also decay towards 0, i.e. towards
+    # the dead reckoning's own heading, when that heading has an absolute aid (the magnetometer).
     offset_reversion_s: float | None = None
     turn_scale_sd: float = 0.02  # a turn of 90 deg adds 1.8 deg of offset: phone gyro scale error
     scale_walk_per_sqrt_m: float = 0.003  # the step-length scale drifts slowly (pace changes)

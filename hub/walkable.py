@@ -12,7 +12,7 @@ only when its centre lies deeper than `clearance_m` inside the area, with cleara
 cell diagonal + half the sample spacing along a move: then every point where a move crosses a wall
 is within reach of a sampled cell that is marked blocked, so no wall, however thin, is jumped.
 The price is that the strip of about 1.2 cells (0.12 m at 0.1 m cells) along every wall counts
-as wall; people keep more than that from walls anyway. Measured on the ILC plan (docs/map-matching.md):
+as wall; people keep more than that from walls anyway. Measured on the ILC plan:
 this grid check costs 0.12 ms for 500 moves of 0.7 m against 2.2 ms for shapely's vectorised
 `covered_by` on the same moves, and its cost does not grow with the number of holes.
 """

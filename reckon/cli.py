@@ -251,6 +251,8 @@ def run_edge_command(args: argparse.Namespace, progress: Callable[[str], None]) 
     stop = _stop_on_signals()
     session, source = open_sources(args.source, args.agent, args.speed, stop,
                                    Path(args.venue) if args.venue else None, start_at=args.start_at)
+    if hasattr(source, "addresses"):  # a phone: the person needs the page's address
+        print(source.addresses(), file=sys.stderr, flush=True)
     summary = run_edge(_bus_config(args, "connect"), session, args.agent, source, stop, pose_rate_hz=args.pose_rate,
                        wait_for=args.wait_for, wait_timeout_s=args.wait_timeout,
                        progress=lambda state: progress(str(state)))

@@ -55,12 +55,16 @@ class EdgeSummary:
     final_pose: tuple[float, float, float] | None = None
     swimmer: bool = False
     lengths: int = 0  # swimmers: SwimLength messages out
+    pedestrian: bool = False  # a phone: `poses` are its steps
 
     def __str__(self) -> str:
         if self.swimmer:
             return f"edge {self.agent_id}: {self.messages_in} messages in, {self.samples} samples, {self.lengths} lengths out"
         pose = "none" if self.final_pose is None else "x %.2f m, y %.2f m, heading %.1f deg" % (
             self.final_pose[0], self.final_pose[1], math.degrees(self.final_pose[2]))
+        if self.pedestrian:
+            return (f"edge {self.agent_id}: {self.messages_in} messages in, {self.samples} samples, "
+                    f"{self.poses} steps out; last pose {pose}")
         return (f"edge {self.agent_id}: {self.messages_in} messages in, {self.samples} samples, "
                 f"{self.poses} poses and {self.impacts} impacts out, {self.corrections} corrections applied "
                 f"({self.extrapolated} samples with a wheel extrapolated, {self.wheel_overrun} behind the wheel "
@@ -112,7 +116,7 @@ def run_edge(config: zenoh.Config, session: Session, agent_id: str, source: Iter
     else:
         edge = ChairEdge(agent, pose_rate_hz)
     venue = session.venue.name
-    summary = EdgeSummary(agent_id, swimmer=isinstance(edge, SwimEdge))
+    summary = EdgeSummary(agent_id, swimmer=isinstance(edge, SwimEdge), pedestrian=isinstance(edge, PedestrianEdge))
     with open_session(config) as bus, Publisher(bus) as publisher, \
             Subscription(bus, keys.correction(venue, agent_id), capacity=256) as corrections, \
             Alive(bus, venue, wire.Role.EDGE, agent_id):

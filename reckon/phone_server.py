@@ -136,10 +136,17 @@ class PhoneSource:
         self._started.wait()
         if self._error is not None:
             raise ConfigError(f"{url!r}: cannot listen ({self._error})") from self._error
-        log.info("phone %s/%s: open https://%s:%d/ on the phone%s", agent_id, sensor_id, self.host, self.port,
-                 "" if self.http_port is None else f"; Sensor Logger push to http://{self.host}:{self.http_port}/sensorlogger")
+        log.info("%s", self.addresses())
 
     # -- the consumer's side
+
+    def addresses(self) -> str:
+        """Where the phone goes: the page (and the Sensor Logger push, when listening)."""
+        host = self.host if self.host not in ("0.0.0.0", "::") else "<this machine's address>"
+        text = f"phone {self.agent_id}/{self.sensor_id}: open https://{host}:{self.port}/ on the phone"
+        if self.http_port is not None:
+            text += f"; Sensor Logger push to http://{host}:{self.http_port}/sensorlogger"
+        return text
 
     def __iter__(self) -> Iterator[Any]:
         while True:

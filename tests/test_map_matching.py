@@ -4,7 +4,7 @@ The map is the indoor-navigation paper's table 5 (Chiba Tech building 2, cm -> m
 I-J-G-H-L-K-E-F-B-C-G-H-D-A-E-F-I (278 m, 15 turns). The truth walks the corridor centre lines in
 0.7 m steps at 1.8 steps/s; the dead reckoning has the paper's calibration error (3 deg, table 3),
 a gyro drift of 0.1 deg/s, 8 % long steps, 2 deg of heading noise and 3 % of length noise per step.
-`python tests/test_map_matching.py` prints the numbers quoted in docs/map-matching.md.
+Results on simulated and real walks are in docs/pdr-estimator.md (`reckon eval`).
 """
 
 from __future__ import annotations

@@ -26,8 +26,9 @@ from typing import Any, Callable
 import numpy as np
 
 from edge.pdr_edge import PedestrianEdge
+from hub.map_matching import SnapStage
 from hub.map_snap_paper import PaperSnapMatcher
-from hub.pedestrian_hub import PedestrianHub
+from hub.pedestrian_hub import PedestrianHub, particle_matcher_factory
 from protocol import messages
 from protocol.errors import InputError
 from protocol.session import AgentKind, Mount, Session
@@ -70,13 +71,15 @@ class Track:
 
 
 @dataclass
-class MethodRun:
-    """One method over one session: the edge's and the hub's tracks per agent, snap records."""
+class PhoneRun:
+    """One phone (sensor) of one agent under one method: the edge's and the hub's tracks."""
 
-    method: str
-    edge: dict[str, Track] = field(default_factory=dict)
-    hub: dict[str, Track] | None = None  # None: no map matcher for this method on this venue
-    snaps: list[tuple[str, Any]] = field(default_factory=list)  # (agent id, SnapRecord)
+    agent_id: str
+    sensor_id: str
+    mount: str
+    edge: Track = field(default_factory=Track)
+    hub: Track | None = None  # None: no map matcher for this method on this venue
+    snaps: list[Any] = field(default_factory=list)  # the paper's SnapRecords
 
 
 @dataclass
@@ -84,12 +87,13 @@ class WaypointErrors:
     method: str
     map_matching: bool
     matcher: str
+    mount: str
     session: str
     errors_m: np.ndarray
     heading_errors_deg: np.ndarray
     snaps_correct: int | None = None
-    snaps_total: int | None = None  # true junction passages
-    snaps_wrong: int | None = None  # applied snaps at a point not being passed
+    snaps_total: int | None = None  # true turns
+    snaps_wrong: int | None = None  # applied position snaps matching no true turn
 
 
 @dataclass
@@ -99,42 +103,46 @@ class PedestrianReport:
     problems: list[str] = field(default_factory=list)
 
 
-def run_method(session: Session, inputs: list[Any], method: str) -> MethodRun:
-    """Push the session's phone batches and stand scans through the edge and the hub."""
-    run = MethodRun(method)
+def phones(session: Session) -> list[tuple[Any, Any]]:
+    """(agent, sensor) of every phone (hand or pocket) in the session."""
+    return [(agent, sensor) for agent in session.agents for sensor in agent.sensors
+            if sensor.mount in (Mount.HAND, Mount.POCKET)]
+
+
+def run_method(session: Session, inputs: list[Any], method: str) -> list[PhoneRun]:
+    """Push the session's phone batches and stand scans through one edge per phone and its hub
+    (a hub per phone: the hub keys its matchers by agent, and one agent may carry two phones)."""
     if method == "paper":
         from edge.pdr_paper import PaperPdr
 
-        edges = {a.id: PedestrianEdge(a, estimator=PaperPdr(height_m=a.height_m), method="paper")
-                 for a in session.agents}
         points = session.venue.map_points
         factory = (lambda agent_id: PaperSnapMatcher(points)) if points else None  # noqa: E731
-        hub = PedestrianHub(session, factory, method="paper") if factory else None
     else:
-        edges = {a.id: PedestrianEdge(a, session.venue) for a in session.agents}
-        hub = PedestrianHub(session)
-        if not any(view.matcher for view in hub.agents.values()):
-            hub = None
-    run.edge = {agent_id: Track() for agent_id in edges}
-    run.hub = {agent_id: Track() for agent_id in edges} if hub is not None else None
+        factory = particle_matcher_factory(session.venue)
+    runs: dict[str, tuple[PhoneRun, PedestrianEdge, PedestrianHub | None]] = {}
+    for agent, sensor in phones(session):
+        estimator = PaperPdr(height_m=agent.height_m) if method == "paper" else None
+        edge = PedestrianEdge(agent, session.venue, estimator, method=method, sensor_id=sensor.id)
+        hub = PedestrianHub(session, factory, method=method) if factory is not None else None
+        runs[sensor.id] = (PhoneRun(agent.id, sensor.id, sensor.mount.value, hub=Track() if hub else None), edge, hub)
     for message in inputs:
-        edge = edges.get(message.agent_id)
-        if edge is None:
+        if message.sensor_id not in runs:
             continue
+        run, edge, hub = runs[message.sensor_id]
         if messages.type_name(message) == "StandScan":
             edge.scan(message)
             if message.accepted:
-                run.edge[message.agent_id].add(message.timestamp_ns, message.x_m, message.y_m, message.heading_rad)
+                run.edge.add(message.timestamp_ns, message.x_m, message.y_m, message.heading_rad)
             continue
         for pose in edge.push(message):
-            run.edge[pose.agent_id].add(pose.timestamp_ns, pose.x_m, pose.y_m, pose.heading_rad)
-            if hub is None or run.hub is None:
-                continue
-            for out in hub.on_message(pose):
-                run.hub[out.agent_id].add(out.timestamp_ns, out.x_m, out.y_m, out.heading_rad)
-    if hub is not None:
-        run.snaps = [(agent_id, snap) for agent_id, view in hub.agents.items() for snap in view.snaps]
-    return run
+            run.edge.add(pose.timestamp_ns, pose.x_m, pose.y_m, pose.heading_rad)
+            if hub is not None and run.hub is not None:
+                for out in hub.on_message(pose):
+                    run.hub.add(out.timestamp_ns, out.x_m, out.y_m, out.heading_rad)
+    for run, _, hub in runs.values():
+        if hub is not None:
+            run.snaps = list(hub.agents[run.agent_id].snaps)
+    return [run for run, _, _ in runs.values()]
 
 
 def read_inputs(path: Path) -> list[Any]:
@@ -153,12 +161,14 @@ def evaluate_pedestrians(sessions: list[tuple[SessionData, Path]],
         inputs = read_inputs(path)
         for method in ("paper", "reckon"):
             progress(f"{path.name}: {method}")
-            run = run_method(data.session, inputs, method)
-            report.rows.append(score(data, path, run, run.edge, False, "none"))
-            if run.hub is not None:
-                matcher = "turn snap" if method == "paper" else "particle filter"
-                report.rows.append(score(data, path, run, run.hub, True, matcher))
-            elif method == "paper":
+            runs = run_method(data.session, inputs, method)
+            for mount in sorted({run.mount for run in runs}):
+                chosen = [run for run in runs if run.mount == mount]
+                report.rows.append(score(data, path, method, mount, chosen, False, "none"))
+                if all(run.hub is not None for run in chosen):
+                    matcher = "turn snap" if method == "paper" else "particle filter"
+                    report.rows.append(score(data, path, method, mount, chosen, True, matcher))
+            if method == "paper" and not data.session.venue.map_points:
                 no_points.append(path.name)
     if no_points:
         report.problems.append(f"{len(no_points)} of {len(sessions)} sessions have no corridor map points: the "
@@ -167,19 +177,21 @@ def evaluate_pedestrians(sessions: list[tuple[SessionData, Path]],
     return report
 
 
-def score(data: SessionData, path: Path, run: MethodRun, tracks: dict[str, Track], map_matching: bool,
+def score(data: SessionData, path: Path, method: str, mount: str, runs: list[PhoneRun], map_matching: bool,
           matcher: str) -> WaypointErrors:
+    """Waypoint errors (and heading after turns, snaps) of these phones' edge or hub tracks."""
     errors, heading_errors = [], []
     turns = data.session.source.get("turns", []) if isinstance(data.session.source, dict) else []
-    for agent_id, track in tracks.items():
-        truth = data.truth[agent_id]
-        scans = [s for s in data.scans.get(agent_id, []) if s.accepted]
+    for run in runs:
+        track = run.hub if map_matching and run.hub is not None else run.edge
+        truth = data.truth[run.agent_id]
+        scans = [s for s in data.scans.get(run.agent_id, []) if s.accepted and s.sensor_id in ("", run.sensor_id)]
         if not scans:
             continue
         after = truth.time_ns > scans[0].timestamp_ns
         x, y, _ = track.at(truth.time_ns[after])
         errors.append(np.hypot(x - truth.x_m[after], y - truth.y_m[after]))
-        agent_turns = [t for t in turns if t.get("agent_id", agent_id) == agent_id]
+        agent_turns = [t for t in turns if t.get("agent_id", run.agent_id) == run.agent_id]
         if agent_turns and np.all(np.isfinite(truth.heading_rad)):
             times = np.array([int(t["time_ns"]) for t in agent_turns]) + int(TURN_SETTLE_S * 1e9)
             times = times[(times > scans[0].timestamp_ns) & (times <= truth.time_ns[-1])]
@@ -187,11 +199,13 @@ def score(data: SessionData, path: Path, run: MethodRun, tracks: dict[str, Track
             true_heading = np.array([_heading_at(truth, t) for t in times])
             heading_errors.append(np.degrees(np.abs(np.remainder(heading - true_heading + math.pi, 2 * math.pi)
                                                     - math.pi)))
-    row = WaypointErrors(run.method, map_matching, matcher, path.name,
+    row = WaypointErrors(method, map_matching, matcher, mount, path.name,
                          np.concatenate(errors) if errors else np.array([]),
                          np.concatenate(heading_errors) if heading_errors else np.array([]))
-    if map_matching and run.method == "paper" and turns:
-        row.snaps_correct, row.snaps_total, row.snaps_wrong = _snap_score(turns, run.snaps)
+    if map_matching and method == "paper" and turns:
+        row.snaps_correct, row.snaps_total, row.snaps_wrong = _snap_score(
+            [t for t in turns if any(t.get("agent_id", r.agent_id) == r.agent_id for r in runs)],
+            [(r.agent_id, snap) for r in runs for snap in r.snaps])
     return row
 
 
@@ -201,8 +215,9 @@ def _heading_at(truth: Any, time_ns: int) -> float:
 
 
 def _snap_score(turns: list[dict], snaps: list[tuple[str, Any]]) -> tuple[int, int, int]:
-    """(true passages with a correct applied snap, true passages, applied snaps at a wrong point)."""
-    applied = [(agent_id, s) for agent_id, s in snaps if s.applied]
+    """(true turns with a correct position snap, true turns, position snaps matching no true turn)."""
+    # The position snap names the point; the heading snap that follows it is the same decision.
+    applied = [(agent_id, s) for agent_id, s in snaps if s.applied and s.stage is SnapStage.POSITION]
     correct, used = 0, set()
     for turn in turns:
         agent_id = turn.get("agent_id")
@@ -217,11 +232,12 @@ def _snap_score(turns: list[dict], snaps: list[tuple[str, Any]]) -> tuple[int, i
     return correct, len(turns), wrong
 
 
-def pooled(report: PedestrianReport) -> list[tuple[tuple[str, bool, str], np.ndarray, np.ndarray, list[WaypointErrors]]]:
-    """Rows of every session pooled per (method, map matching, matcher), in first-seen order."""
-    groups: dict[tuple[str, bool, str], list[WaypointErrors]] = {}
-    for row in report.rows:
-        groups.setdefault((row.method, row.map_matching, row.matcher), []).append(row)
+def pooled(report: PedestrianReport) -> list[tuple[tuple[str, bool, str, str], np.ndarray, np.ndarray,
+                                                  list[WaypointErrors]]]:
+    """Rows of every session pooled per (method, map matching, matcher, mount), ordered by mount."""
+    groups: dict[tuple[str, bool, str, str], list[WaypointErrors]] = {}
+    for row in sorted(report.rows, key=lambda r: r.mount):
+        groups.setdefault((row.method, row.map_matching, row.matcher, row.mount), []).append(row)
     return [(key, np.concatenate([r.errors_m for r in rows]), np.concatenate([r.heading_errors_deg for r in rows]),
              rows) for key, rows in groups.items()]
 
@@ -242,8 +258,8 @@ def _snaps(rows: list[WaypointErrors]) -> dict[str, int] | None:
 
 def to_json(report: PedestrianReport) -> dict[str, Any]:
     results = []
-    for (method, map_matching, matcher), errors, headings, rows in pooled(report):
-        results.append({"method": method, "map_matching": map_matching, "matcher": matcher,
+    for (method, map_matching, matcher, mount), errors, headings, rows in pooled(report):
+        results.append({"method": method, "map_matching": map_matching, "matcher": matcher, "mount": mount,
                         "waypoints": int(len(errors)), "waypoint_error_m": _percentiles(errors),
                         "heading_error_after_turn_deg": _percentiles(headings) if len(headings) else None,
                         "turn_snaps": _snaps(rows),
@@ -255,18 +271,18 @@ def to_table(report: PedestrianReport) -> str:
     fmt = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
     lines = [f"{len(report.sessions)} pedestrian session(s): position error at the truth waypoints after the "
              "first stand (m)",
-             f"{'method':8} {'map matching':16} {'waypoints':>9} {'median':>7} {'p75':>7} {'p90':>7} "
+             f"{'method':8} {'phone':7} {'map matching':16} {'waypoints':>9} {'median':>7} {'p75':>7} {'p90':>7} "
              f"{'heading after turns p90 deg':>28} {'turn snaps':>18}"]
-    for (method, map_matching, matcher), errors, headings, rows in pooled(report):
+    for (method, map_matching, matcher, mount), errors, headings, rows in pooled(report):
         p = _percentiles(errors)
         h = _percentiles(headings)["p90"] if len(headings) else None
         snaps = _snaps(rows)
         snap_text = "-" if snaps is None else f"{snaps['correct']}/{snaps['true_turns']}, {snaps['wrong']} wrong"
-        lines.append(f"{method:8} {(matcher if map_matching else 'none'):16} {len(errors):9d} {fmt(p['median']):>7} "
+        lines.append(f"{method:8} {mount:7} {(matcher if map_matching else 'none'):16} {len(errors):9d} {fmt(p['median']):>7} "
                      f"{fmt(p['p75']):>7} {fmt(p['p90']):>7} {fmt(h):>28} {snap_text:>18}")
     if len(report.sessions) > 1:
         lines += ["", "p75 per session (m): " + ", ".join(
-            f"{key[0]}{'+' + key[2] if key[1] else ''}" for key, *_ in pooled(report))]
+            f"{key[0]}{'+' + key[2] if key[1] else ''} ({key[3]})" for key, *_ in pooled(report))]
         by_session: dict[str, list[str]] = {}
         for _, _, _, rows in pooled(report):
             for r in rows:
