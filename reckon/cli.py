@@ -12,7 +12,7 @@ import logging
 import sys
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from protocol.errors import ReckonError
 from protocol.session import AgentKind
@@ -271,8 +271,16 @@ def run_hub_command(args: argparse.Namespace, progress: Callable[[str], None]) -
                                corrections=frozenset(args.corrections.split(",")) if args.corrections else frozenset())
     except ValueError as error:
         raise ReckonError(f"reckon hub: {error}") from None
+    walkers = {agent.id for agent in session.agents if agent.kind is AgentKind.PEDESTRIAN}
+    latest: dict[str, str] = {}
+
+    def show(output: Any) -> None:  # pedestrians' map-matched positions, as they walk
+        if output.DESCRIPTOR.name == "EstimatedPose" and output.agent_id in walkers:
+            latest[output.agent_id] = f"{output.agent_id} x {output.x_m:.1f} m y {output.y_m:.1f} m"
+            progress("; ".join(latest[agent_id] for agent_id in sorted(latest)))
+
     summary = run_hub(_bus_config(args, "listen"), session, _stop_on_signals(), settings,
-                      Path(args.output) if args.output else None)
+                      Path(args.output) if args.output else None, on_output=show if walkers else None)
     print(summary)
     return 0
 

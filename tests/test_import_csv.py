@@ -3,6 +3,7 @@ or a counted skip naming file, line and value (reckon/importers/csv_folder.py, d
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -454,3 +455,44 @@ def test_every_accepted_unit_is_documented() -> None:
     doc = (EXAMPLE.parents[1] / "csv-import.md").read_text(encoding="utf-8")
     units = list(NS_PER_TIME_UNIT) + [unit for table in TO_PROTOCOL_UNIT.values() for unit in table]
     assert [unit for unit in units if f"`{unit}`" not in doc] == []
+
+
+PHONE_TOML = """\
+[venue]
+name = "hall"
+stands = [{id = "door", x_m = 2.0, y_m = 5.0, heading_deg = 0.0}]
+
+[[agents]]
+id = "walker"
+kind = "pedestrian"
+sensors = [{id = "phone", mount = "hand", rate_hz = 50.0}]
+"""
+
+
+def test_a_phone_walk_with_its_stand_imports_and_evaluates(tmp_path: Path, capsys) -> None:
+    """Any phone app's export: the phone's CSV, when it lay on the stand, and the truth; `reckon
+    eval` then scores it as a pedestrian walk (the walker steps along +x at 1.8 Hz, 0.7 m a step)."""
+    from reckon.cli import main
+
+    folder = tmp_path / "walk"
+    folder.mkdir()
+    (folder / "session.toml").write_text(PHONE_TOML)
+    rows = ["time_s,accel_x_mps2,accel_y_mps2,accel_z_mps2,gyro_x_radps,gyro_y_radps,gyro_z_radps"]
+    for i in range(50 * 20):
+        t = i / 50.0
+        bounce = 2.5 * math.sin(2 * math.pi * 1.8 * t) if t > 2.0 else 0.0
+        rows.append(f"{100 + t:.3f},0,{0.3 * bounce / 2.5:.4f},{9.81 + bounce:.4f},0,0,0")
+    (folder / "phone.csv").write_text("\n".join(rows) + "\n")
+    (folder / "stands.csv").write_text("time_s,sensor_id,stand_id\n101.000,phone,door\n101.5,phone,nowhere\n")
+    (folder / "truth.csv").write_text("time_s,agent_id,x_m,y_m\n" + "".join(
+        f"{100 + t:.1f},walker,{2.0 + max(0.0, t - 2.0) * 1.26:.3f},5.0\n" for t in range(2, 21, 2)))
+    report = import_csv_folder(folder, tmp_path / "walk.mcap")
+    assert report.rows_skipped == 1  # the unknown stand, named
+    data = read_session(tmp_path / "walk.mcap")
+    scan = data.scans["walker"][0]
+    assert (scan.accepted, scan.stand_id, scan.x_m, scan.y_m, scan.timestamp_ns) == (True, "door", 2.0, 5.0,
+                                                                                     101_000_000_000)
+    assert main(["eval", str(tmp_path / "walk.mcap"), "--json"]) == 0
+    rows_out = {(r["method"], r["map_matching"]): r for r in json.loads(capsys.readouterr().out)["results"]}
+    assert rows_out[("reckon", False)]["waypoints"] == 10
+    assert rows_out[("reckon", False)]["waypoint_error_m"]["p90"] < 5.0

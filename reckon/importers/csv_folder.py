@@ -6,6 +6,7 @@ The folder (docs/csv-import.md, example in docs/examples/csv-session/):
                   optional mag_{x,y,z}_gauss, each with a unit suffix (tables.TO_PROTOCOL_UNIT)
   beacons.csv     optional: time_s, sensor_id, beacon_id, rssi_dbm (sensor = the receiver)
   truth.csv       optional: time_s, agent_id, x_m, y_m and optional heading_rad
+  stands.csv      optional: time_s, sensor_id, stand_id (a phone put on one of the venue's stands)
 Bad input never gives a traceback: file-level mistakes raise InputError/ConfigError naming the
 file; stray rows are skipped and counted in the ImportReport (rules in reckon.importers.tables).
 """
@@ -23,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from protocol import keys
+from protocol import messages as protocol_messages
 from protocol.errors import InputError
 from protocol.session import Session, load_toml
 from reckon.importers.report import ImportReport
@@ -36,6 +39,7 @@ log = logging.getLogger(__name__)
 SESSION_FILE = "session.toml"
 BEACONS_FILE = "beacons.csv"
 TRUTH_FILE = "truth.csv"
+STANDS_FILE = "stands.csv"
 RATE_TOLERANCE = 0.10  # warn when the data's median rate differs from the TOML rate_hz by more than 10 %
 _IMU_COLUMN = re.compile(r"^(accel|gyro|mag)_([xyz])_(.+)$")
 _TIME_COLUMN = re.compile(r"^time_(.+)$")
@@ -71,6 +75,7 @@ def import_csv_folder(folder: Path, output: Path) -> ImportReport:
         streams.append(imu_messages(venue, agent_id, sensor_id, data, report.sensors[sensor_id]))
     streams.append(_read_beacons(folder / BEACONS_FILE, session, report))
     streams.extend(_read_truth(folder / TRUTH_FILE, session, report))
+    streams.append(_read_stands(folder / STANDS_FILE, session, report))
     write_messages(output, session, streams)
     log.info("imported %s: %d sensors, %d rows skipped", folder, len(imu), report.rows_skipped)
     return report
@@ -107,13 +112,13 @@ def _sensor_files(folder: Path, session: Session) -> dict[str, Path]:
         if sensor_id.casefold() in folded:
             raise InputError(f"{folder / SESSION_FILE}: sensor ids {folded[sensor_id.casefold()]!r} and {sensor_id!r} "
                              "differ only in case; their CSV files would clash")
-        if f"{sensor_id}.csv" in (BEACONS_FILE, TRUTH_FILE):
+        if f"{sensor_id}.csv" in (BEACONS_FILE, TRUTH_FILE, STANDS_FILE):
             raise InputError(f"{folder / SESSION_FILE}: sensor id {sensor_id!r} clashes with {sensor_id}.csv, "
                              "which holds other data; rename the sensor")
         folded[sensor_id.casefold()] = sensor_id
     candidates: dict[str, list[Path]] = defaultdict(list)
     for path in sorted(folder.iterdir()):
-        if path.is_file() and path.suffix.lower() == ".csv" and path.name not in (BEACONS_FILE, TRUTH_FILE):
+        if path.is_file() and path.suffix.lower() == ".csv" and path.name not in (BEACONS_FILE, TRUTH_FILE, STANDS_FILE):
             candidates[path.stem.casefold()].append(path)
     found: dict[str, Path] = {}
     for paths in candidates.values():
@@ -239,6 +244,36 @@ def _read_beacons(path: Path, session: Session, report: ImportReport) -> Iterato
             sensor_id = sensor_ids[sensor_index[row]]
             yield sighting_message(session.venue.name, owners[sensor_id].id, sensor_id, beacon_ids[beacon_index[row]],
                                    times[row], rssi[row])
+
+    return messages()
+
+
+def _read_stands(path: Path, session: Session, report: ImportReport) -> Iterator[Stamped]:
+    """StandScan messages (accepted, the stand's pose from the venue) in time order: a recording
+    made without reckon's phone page has no scanned code, only when the phone was on which stand."""
+    if not path.is_file():
+        return iter(())
+    display = str(path)
+    owners = session.sensor_owner()
+    stands = {stand.id: stand for stand in session.venue.stands}
+    rows: list[tuple[int, str, str]] = []
+    for line, fields, time_ns, _ in _aux_rows(path, ("sensor_id", "stand_id"), (), report):
+        if fields["sensor_id"] not in owners:
+            report.skip(display, line, "unknown sensor", f"sensor_id {fields['sensor_id']!r} is not in {SESSION_FILE}")
+        elif fields["stand_id"] not in stands:
+            report.skip(display, line, "unknown stand", f"stand_id {fields['stand_id']!r} is not in {SESSION_FILE}")
+        else:
+            rows.append((time_ns, fields["sensor_id"], fields["stand_id"]))
+    rows.sort(key=lambda row: row[0])
+
+    def messages() -> Iterator[Stamped]:
+        for time_ns, sensor_id, stand_id in rows:
+            stand, agent_id = stands[stand_id], owners[sensor_id].id
+            yield time_ns, keys.scan(session.venue.name, agent_id), protocol_messages.new(
+                "StandScan", timestamp_ns=time_ns, agent_id=agent_id, sensor_id=sensor_id, stand_id=stand.id,
+                x_m=stand.x_m, y_m=stand.y_m, floor=stand.floor, heading_rad=math.radians(stand.heading_deg),
+                tilt_rad=math.radians(stand.tilt_deg), payload=f"{display} (no code scanned)", accepted=True,
+                reason="")
 
     return messages()
 
