@@ -82,6 +82,18 @@ def run_sim_room(args: argparse.Namespace, progress: Callable[[str], None]) -> i
     return 0
 
 
+def run_sim_pedestrian(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from sim_devices.pedestrian.params import params_with_overrides
+    from sim_devices.pedestrian.session import simulate_pedestrian
+
+    params = params_with_overrides(_overrides(args.set))
+    summary = simulate_pedestrian(Path(args.output), seed=args.seed, people=args.people, preset=args.preset,
+                                  mount=args.mount, params=params, duration_s=args.duration,
+                                  progress=lambda fraction: progress(f"simulating: {100 * fraction:.0f} %"))
+    print(summary)
+    return 0
+
+
 def run_import(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     if args.format == "ilc":
         from reckon.importers.ilc_session import import_walks
@@ -357,8 +369,20 @@ def build_parser() -> argparse.ArgumentParser:
     room.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                       help="override a simulator figure (docs/simulator-room.md)")
     room.set_defaults(run=run_sim_room)
-    from sim_devices.pedestrian.cli import register as register_pedestrian
-    register_pedestrian(sim_kind)
+    walk = sim_kind.add_parser("pedestrian", help="people walking a building with a phone in the hand or a pocket, "
+                                                  "calibration stands with QR codes (docs/simulator-pedestrian.md)")
+    walk.add_argument("--seed", type=int, default=1)
+    walk.add_argument("--people", type=int, default=3, help="walkers (the paper: 3, statures 169/174/179 cm)")
+    walk.add_argument("--preset", choices=["paper", "floorplan"], default="paper",
+                      help="paper: the paper's 12-point corridor map and route; floorplan: an office floor with "
+                           "rooms and a hall")
+    walk.add_argument("--mount", choices=["hand", "pocket", "both"], default="hand",
+                      help="where each walker carries a phone (both: two phones)")
+    walk.add_argument("--duration", type=float, default=None, help="seconds per walker (default: the whole route)")
+    walk.add_argument("-o", "--output", required=True)
+    walk.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                      help="override a simulator figure (docs/simulator-pedestrian.md)")
+    walk.set_defaults(run=run_sim_pedestrian)
 
     imp = sub.add_parser("import", help="convert recorded logs into a session log")
     imp.add_argument("format", choices=["csv", "ngimu", "tsnd", "tracks", "ilc"],

@@ -7,10 +7,11 @@ trouser pocket, stopping at QR calibration stands, as the indoor-navigation pape
 12-point corridor map, tables 4-5, and its 4-minute route) and `floorplan` (an office floor with
 rooms and a hall, polygons with holes). Modules, in data-flow order: params, venues, person ->
 path -> timeline -> phone -> sensors -> simulate -> session; calibration measures the paper's
-speed model and stand-to-turn heading error on generated walks; cli registers `reckon sim pedestrian`.
+speed model and stand-to-turn heading error on generated walks. `reckon sim pedestrian` is in
+reckon/cli.py.
 
-Names are imported on first use (PEP 562), so `reckon`'s parser can register the subcommand from
-`sim_devices.pedestrian.cli` without loading numpy, scipy and shapely.
+Names are imported on first use (PEP 562), so importing the package loads none of numpy, scipy
+and shapely.
 """
 
 from __future__ import annotations
