@@ -318,7 +318,7 @@ def run_demo(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
           f"mean error live {result.mean_error_m['live']:.2f} m, refined {result.mean_error_m['refined']:.2f} m; "
           f"corrections {', '.join(f'{k} {v}' for k, v in sorted(corrections.items())) or 'none'}")
     print()
-    eval_args = argparse.Namespace(session=game, json=False, plots=out / "plots")
+    eval_args = argparse.Namespace(session=[game], json=False, plots=out / "plots", identity_scaling=False)
     return run_eval(eval_args, progress)
 
 

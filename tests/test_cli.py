@@ -103,3 +103,15 @@ def test_replay_into_record_over_zenoh(game, tmp_path):
     for sensor, series in original.imu.items():
         assert (recorded.imu[sensor].time_ns == series.time_ns).all()
     assert len(recorded.contacts) == len(original.contacts)
+
+
+def test_demo_runs_end_to_end_on_a_short_game(tmp_path, capsys):
+    """The quickstart's main job, shortened: simulate, live through edges and the hub, then eval."""
+    from reckon.cli import main as reckon_main
+
+    assert reckon_main(["demo", "--players", "2", "--duration", "20", "--speed", "10", "--lag", "5",
+                        "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "live pipeline" in out and "mean error live" in out
+    assert "paper" in out and "reckon" in out  # the offline comparison table
+    assert (tmp_path / "hub.mcap").stat().st_size > 0 and any((tmp_path / "plots").iterdir())
