@@ -55,6 +55,11 @@ class IdentitySettings:
     fix_cost: float = 0.6  # evidence needed to send a fix
     fix_after_s: float = 2.0  # ... held for this long
     track_timeout_s: float = 0.3  # a tracker reports every frame; one that comes back gets a new id anyway
+    continue_max_s: float = 5.0  # a new track can continue an agent's track that broke off this long ago (0: never)
+    continue_gate_m: float = 0.7  # ... if it starts this close to where the old track's motion leads
+    continue_spread_mps: float = 1.0  # ... a gate growing this fast with the gap (a chair turns, brakes)
+    continue_coast_s: float = 1.0  # the old track's velocity is extrapolated at most this long
+    continue_clear_m: float = 0.6  # a new track this close to another live track may be a second detection: no
     max_lag_s: float = 0.5
     lag_every_s: float = 5.0
     speed_sd_mps: float = 0.35
@@ -68,6 +73,8 @@ class IdentitySettings:
         checks = {"hop_s": (0.1, 10.0), "delay_s": (0.0, 10.0), "forget_per_s": (0.01, 1.0), "prior_bins": (0.0, 1e3),
                   "nobody_cost": (0.0, 100.0), "claim_margin": (0.0, 100.0), "switch_margin": (0.0, 100.0),
                   "fix_every_s": (0.0, 3600.0), "track_timeout_s": (0.0, 60.0), "max_lag_s": (0.0, 5.0),
+                  "continue_max_s": (0.0, 60.0), "continue_gate_m": (0.0, 100.0), "continue_spread_mps": (0.0, 100.0),
+                  "continue_coast_s": (0.0, 60.0), "continue_clear_m": (0.0, 100.0),
                   "speed_sd_mps": (1e-3, 10.0), "yaw_sd_dps": (1e-3, 1e3), "moving_sd": (1e-3, 10.0),
                   "position_sd_m": (1e-3, 100.0)}
         for name, (low, high) in checks.items():
@@ -87,12 +94,31 @@ class _Track:
 
 
 @dataclass
+class _Lost:
+    """Where an agent's track broke off, and its evidence then: what a continuation inherits."""
+    camera: str
+    last_ns: int
+    xy: np.ndarray
+    velocity: np.ndarray  # m/s, NaN if the track was not moving fast enough to have one
+    cost_sum: np.ndarray
+    cost_count: np.ndarray
+
+    @classmethod
+    def of(cls, camera: str, track: _Track) -> _Lost:
+        last_bin = track.cues.last_ns // BIN_NS
+        velocity = np.array([track.cues.ring.window(name, last_bin, 1)[0] for name in ("vx", "vy")])
+        return cls(camera, track.cues.last_ns, track.cues.latest_xy.copy(), velocity, track.cost_sum.copy(),
+                   track.cost_count.copy())
+
+
+@dataclass
 class IdentityCounters:
     updates: int = 0
     pair_bins: int = 0  # cue comparisons: tracks x agents x bins, summed over updates
     max_pair_bins: int = 0  # ... in the largest update
     solves: int = 0  # assignment problems solved (one per hop, one more per examined new identity)
     identity_changes: int = 0
+    continuations: int = 0  # new tracks that inherited a broken-off track's identity at their first frame
     fixes: int = 0
     frames: int = 0
     tracks: int = 0
@@ -124,6 +150,7 @@ class IdentityEngine:
         self.seen_ns = np.zeros(count, dtype=np.int64)
         self.speed_model = SpeedModel()
         self.tracks: dict[tuple[str, int], _Track] = {}
+        self.lost: dict[int, _Lost] = {}  # agent -> where its last track broke off (until it holds another)
         self.scored_until: dict[str, int] = {}  # camera -> first bin not yet scored
         self.next_lag_bin: dict[str, int] = {}
         self.lag_bins: dict[str, int] = {}
@@ -165,6 +192,7 @@ class IdentityEngine:
         self.counters.frames += 1
         lag_ns = self.lag_bins.get(camera, 0) * BIN_NS
         time_ns = frame.timestamp_ns - lag_ns
+        new = []
         for track_id, x, y in zip(frame.track_id, frame.x_m, frame.y_m):
             key = (camera, int(track_id))
             track = self.tracks.get(key)
@@ -172,17 +200,82 @@ class IdentityEngine:
                 track = self.tracks[key] = _Track(TrackCues(int(track_id)), np.zeros(len(self.agents)),
                                                   np.zeros(len(self.agents)))
                 self.counters.tracks += 1
+                new.append(key)
             track.cues.push(time_ns, float(x), float(y))
+        out = self._continue(camera, new, time_ns) if new else []
         bin_now = time_ns // BIN_NS
         first = self.scored_until.setdefault(camera, bin_now)
         end = bin_now - int(round(self.settings.delay_s / BIN_S))
         if end - first < int(round(self.settings.hop_s / BIN_S)):
-            return []
+            return out
         self.scored_until[camera] = end
         started = time.perf_counter()
-        out = self._update(camera, first, end, frame.position_sd_m, time_ns)
+        out += self._update(camera, first, end, frame.position_sd_m, time_ns)
         self.update_s.append(time.perf_counter() - started)
         return out
+
+    # -- continuation: a track that breaks off and comes back under a new id ------------------
+
+    def _continue(self, camera: str, new: list[tuple[str, int]], now_ns: int) -> list[Any]:
+        """A new track inherits an agent's identity (and evidence) in its first frame when it starts where
+        that agent's broken-off track was heading and, for an agent the hub places, where the hub has it;
+        only if it is the one new track there, that agent the one candidate, and no other live track is
+        within continue_clear_m (a second detection of someone tracked, or a split, starts next to them)."""
+        s = self.settings
+        if s.continue_max_s <= 0:
+            return []
+        holders = {t.agent: k for k, t in self.tracks.items() if t.agent >= 0}
+        candidates: dict[int, _Lost] = {}
+        for i, lost in list(self.lost.items()):
+            if now_ns - lost.last_ns > s.continue_max_s * 1e9:
+                del self.lost[i]
+            elif lost.camera == camera and i not in holders:
+                candidates[i] = lost
+        for i, key in holders.items():
+            track = self.tracks[key]
+            if key[0] == camera and track.cues.last_ns < now_ns:  # held, but not in this frame: it broke off
+                candidates[i] = _Lost.of(camera, track)
+        if not candidates:
+            return []
+        fresh = set(new)
+        live = np.array([t.cues.latest_xy for k, t in self.tracks.items()
+                         if k[0] == camera and t.cues.last_ns == now_ns and k not in fresh]).reshape(-1, 2)
+        matches: dict[tuple[str, int], list[int]] = {}
+        for key in new:
+            xy = self.tracks[key].cues.latest_xy
+            if len(live) and np.hypot(*(live - xy).T).min() < s.continue_clear_m:
+                continue
+            matches[key] = [i for i, lost in candidates.items() if self._continues(i, lost, xy, now_ns)]
+        per_agent: dict[int, int] = {}
+        for agents in matches.values():
+            for i in agents:
+                per_agent[i] = per_agent.get(i, 0) + 1
+        out = []
+        for key, agents in matches.items():
+            if len(agents) != 1 or per_agent[agents[0]] != 1:
+                continue
+            i = agents[0]
+            lost = candidates[i]
+            if i in holders:
+                self.tracks[holders[i]].agent = -1  # its drop, later, says nothing: the new identity replaces it
+            track = self.tracks[key]
+            track.cost_sum, track.cost_count = lost.cost_sum.copy(), lost.cost_count.copy()
+            track.agent, track.held_since_ns = i, now_ns
+            self.lost.pop(i, None)
+            self.counters.continuations += 1
+            self.counters.identity_changes += 1
+            out.append(self._identity(i, camera, key[1], 0.0, now_ns))
+        return out
+
+    def _continues(self, i: int, lost: _Lost, xy: np.ndarray, now_ns: int) -> bool:
+        s = self.settings
+        gap_s = max(now_ns - lost.last_ns, 0) * 1e-9
+        velocity = np.where(np.isfinite(lost.velocity), lost.velocity, 0.0)
+        heading = lost.xy + velocity * min(gap_s, s.continue_coast_s)
+        if np.hypot(*(xy - heading)) > s.continue_gate_m + s.continue_spread_mps * gap_s:
+            return False
+        pose = self.pose_of(self.agents[i].agent_id, now_ns) if self.pose_of else None
+        return pose is None or bool(np.hypot(*(xy - pose[0])) <= s.continue_gate_m + 3.0 * pose[1])
 
     # -- one hop -----------------------------------------------------------------------------
 
@@ -317,6 +410,7 @@ class IdentityEngine:
                 out.append(self._identity(track.agent, camera, 0, 0.0, now_ns))  # lost this track
             track.agent = agent
             track.held_since_ns = now_ns
+            self.lost.pop(agent, None)
             self.counters.identity_changes += 1
             if agent >= 0:
                 out.append(self._identity(agent, camera, key[1], self._margin(evidence, row, agent), now_ns))
@@ -411,6 +505,8 @@ class IdentityEngine:
     def _drop(self, key: tuple[str, int], now_ns: int) -> Any | None:
         """Forget a track the camera lost; its agent, if any, now has no track."""
         track = self.tracks.pop(key)
+        if track.agent >= 0:
+            self.lost[track.agent] = _Lost.of(key[0], track)
         return self._identity(track.agent, key[0], 0, 0.0, now_ns) if track.agent >= 0 else None
 
     def _identity(self, agent: int, camera: str, track_id: int, score: float, now_ns: int) -> Any:

@@ -80,6 +80,16 @@ class MapMatcher(Protocol):
         """The dead reckoning restarted from this known pose; the next pose continues from it."""
         ...
 
+    refined_lag_steps: int  # how many poses the refined track lags the live one; 0: no refined track
+
+    def refined(self) -> list[MatchedPose]:
+        """Poses refined by later evidence since the last call (a matcher without a lag: none)."""
+        ...
+
+    def flush(self) -> list[MatchedPose]:
+        """End of the stream: the refined poses still waiting."""
+        ...
+
 
 def wrap_angle_rad(angle_rad: np.ndarray | float) -> np.ndarray | float:
     """Angle(s) wrapped to [-pi, pi); a float for a float."""

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hub.map_lag import LagHistory
 from hub.map_matching import DeadReckonedPose, MatchedPose, wrap_angle_rad
 from hub.walkable import WalkableArea
 
@@ -60,6 +61,8 @@ class ParticleSettings:
     resample_below_fraction: float = 0.5  # N_eff < P / 2
     mode_cell_m: float = 1.0  # cell for picking the densest part of a split cloud
     gap_s: float = 5.0  # a longer silence between poses is counted as a gap
+    # A refined track this many poses behind the live one (hub/map_lag.py); 0: none.
+    smoothing_lag_steps: int = 0
 
 
 @dataclass
@@ -96,6 +99,9 @@ class ParticleMatcher:
         self.output_offset_rad = 0.0
         self.diagnostics = ParticleDiagnostics()
         self.scale[:] = self._initial_scales()
+        self.lag = (LagHistory(settings.smoothing_lag_steps, count, area.is_walkable)
+                    if settings.smoothing_lag_steps > 0 else None)
+        self.finished: list[MatchedPose] = []  # refined poses not yet taken (at most lag + 1)
 
     def _initial_scales(self) -> np.ndarray:
         low, high = self.settings.scale_limits
@@ -123,7 +129,26 @@ class ParticleMatcher:
             self._propagate(previous, pose)
         self.previous = pose
         self.diagnostics.steps += 1
-        return self._output(pose)
+        live = self._output(pose)
+        if self.lag is not None:
+            self.finished += self.lag.record(live.time_ns, live.heading_rad, self.x_m, self.y_m, self.weight)
+        return live
+
+    @property
+    def refined_lag_steps(self) -> int:
+        return self.settings.smoothing_lag_steps
+
+    def refined(self) -> list[MatchedPose]:
+        """The refined poses finished since the last call, in time order (`smoothing_lag_steps`
+        poses behind `update`; at once for those before a reset or a re-seed)."""
+        out, self.finished = self.finished, []
+        return out
+
+    def flush(self) -> list[MatchedPose]:
+        """End of the stream: every pose still waiting for its lag, refined now."""
+        if self.lag is not None:
+            self.finished += self.lag.flush(self.weight)
+        return self.refined()
 
     def _propagate(self, previous: DeadReckonedPose, pose: DeadReckonedPose) -> None:
         settings, random, count = self.settings, self.random, self.settings.particles
@@ -176,6 +201,8 @@ class ParticleMatcher:
         """Particles on walkable cells drawn around (x, y); the spread doubles per attempt while no
         draw lands on a walkable cell. With none at all, the particles wait at (x, y) off the map."""
         count = self.settings.particles
+        if self.lag is not None:  # the ancestry ends: what waits is finished with the weights it has
+            self.finished += self.lag.flush(self.weight)
         for attempt in range(self.settings.seed_attempts):
             spread_m = position_sd_m * 2.0 ** attempt
             candidates_x = x_m + self.random.normal(0.0, spread_m, count)
@@ -201,6 +228,8 @@ class ParticleMatcher:
         chosen = np.searchsorted(cumulative, pointers)
         self.x_m, self.y_m = self.x_m[chosen], self.y_m[chosen]
         self.offset_rad, self.scale = self.offset_rad[chosen], self.scale[chosen]
+        if self.lag is not None:
+            self.lag.reindex(chosen)
         self.weight = np.full(count, 1.0 / count)
         self.diagnostics.resamples += 1
 

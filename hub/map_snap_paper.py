@@ -95,6 +95,14 @@ class PaperSnapMatcher:
         return max((abs(now - heading) for sample_ns, heading in self.history if sample_ns >= oldest_ns),
                    default=0.0)
 
+    refined_lag_steps = 0  # the paper's snap decides at once: it has no refined track
+
+    def refined(self) -> list[MatchedPose]:
+        return []
+
+    def flush(self) -> list[MatchedPose]:
+        return []
+
     def update(self, pose: DeadReckonedPose) -> MatchedPose:
         if self.last_heading_rad is None:
             self.unwrapped_heading_rad = pose.heading_rad

@@ -26,6 +26,7 @@ from protocol import keys, messages
 from protocol.session import AgentKind, Session, Venue
 
 METHOD = "reckon"
+REFINED_LAG_STEPS = 20  # pose/refined: about 10 s behind, long enough to have met the next wall or corner
 SNAPS_KEPT = 1024  # a 4-minute walk over the paper's map makes about 20 snap decisions
 # The filter's settings for phones (chosen on ILC site 1 F1 walks 1-5, checked on walks 6-10 and
 # on simulated walks over the paper's corridors and an office floor: docs/pdr-estimator.md).
@@ -41,7 +42,7 @@ SNAPS_KEPT = 1024  # a 4-minute walk over the paper's map makes about 20 snap de
 #   matched through a wall.
 PHONE_PARTICLES = ParticleSettings(
     reset_heading_sd_rad=math.radians(4.0), offset_walk_rad_per_sqrt_s=math.radians(0.15), turn_scale_sd=0.01,
-    offset_reversion_s=10.0, initial_scale_sd=0.05)
+    offset_reversion_s=10.0, initial_scale_sd=0.05, smoothing_lag_steps=REFINED_LAG_STEPS)
 
 
 @dataclass
@@ -89,6 +90,7 @@ class PedestrianHub:
                        for agent in session.agents if agent.kind is AgentKind.PEDESTRIAN}
 
     def on_message(self, message: Any) -> list[Any]:
+        """Outputs for one input: a live pose, and the refined poses the matcher finished."""
         if messages.type_name(message) != "EstimatedPose":
             return []
         view = self.agents.get(message.agent_id)
@@ -100,28 +102,49 @@ class PedestrianHub:
         view.last_time_ns = message.timestamp_ns
         view.poses += 1
         covariance = np.asarray(message.covariance, dtype=float).reshape(3, 3) if len(message.covariance) == 9 else None
-        restarted = message.correction_sequence != view.resets
-        view.resets = message.correction_sequence
-        if view.matcher is None or restarted:
-            if view.matcher is not None:
-                view.matcher.reset(message.timestamp_ns, message.x_m, message.y_m, message.heading_rad)
-            return [self._pose(message.agent_id, message.timestamp_ns, message.x_m, message.y_m, message.heading_rad,
-                               covariance, message.correction_sequence)]
+        previous_sequence, sequence = view.resets, message.correction_sequence
+        restarted = sequence != previous_sequence
+        view.resets = sequence
+        if view.matcher is None:
+            return [self._pose(view, message.timestamp_ns, message.x_m, message.y_m, message.heading_rad, covariance,
+                               sequence)]
+        if restarted:  # what waited for its lag ends with the old stand's track
+            view.matcher.reset(message.timestamp_ns, message.x_m, message.y_m, message.heading_rad)
+            out = self._refined(view, previous_sequence)
+            here = (message.timestamp_ns, message.x_m, message.y_m, message.heading_rad, covariance, sequence)
+            refined_too = view.matcher.refined_lag_steps > 0
+            return out + [self._pose(view, *here)] + (
+                [self._pose(view, *here, track=messages.Track.REFINED)] if refined_too else [])
         matched = view.matcher.update(DeadReckonedPose(message.timestamp_ns, message.x_m, message.y_m,
                                                        message.heading_rad, covariance))
         view.matched += 1
         if matched.snap is not None:
             view.snaps.append(matched.snap)
-        return [self._pose(message.agent_id, matched.time_ns, matched.x_m, matched.y_m, matched.heading_rad,
-                           matched.covariance, message.correction_sequence)]
+        return [self._pose(view, matched.time_ns, matched.x_m, matched.y_m, matched.heading_rad, matched.covariance,
+                           sequence)] + self._refined(view, sequence)
 
-    def _pose(self, agent_id: str, time_ns: int, x_m: float, y_m: float, heading_rad: float,
-              covariance: np.ndarray | None, sequence: int) -> Any:
-        self.agents[agent_id].last = (x_m, y_m)
+    def flush(self) -> list[Any]:
+        """End of the streams: every refined pose still waiting for its lag."""
+        out = []
+        for view in self.agents.values():
+            if view.matcher is not None:
+                out += [self._pose(view, p.time_ns, p.x_m, p.y_m, p.heading_rad, p.covariance, view.resets,
+                                   track=messages.Track.REFINED) for p in view.matcher.flush()]
+        return out
+
+    def _refined(self, view: PedestrianView, sequence: int) -> list[Any]:
+        return [self._pose(view, p.time_ns, p.x_m, p.y_m, p.heading_rad, p.covariance, sequence,
+                           track=messages.Track.REFINED) for p in view.matcher.refined()] if view.matcher else []
+
+    def _pose(self, view: PedestrianView, time_ns: int, x_m: float, y_m: float, heading_rad: float,
+              covariance: np.ndarray | None, sequence: int, track: messages.Track = messages.Track.LIVE) -> Any:
+        if track is messages.Track.LIVE:
+            view.last = (x_m, y_m)
         values = [] if covariance is None else np.asarray(covariance, dtype=float).ravel().tolist()
-        return messages.new("EstimatedPose", timestamp_ns=time_ns, agent_id=agent_id, x_m=x_m, y_m=y_m,
+        return messages.new("EstimatedPose", timestamp_ns=time_ns, agent_id=view.agent_id, x_m=x_m, y_m=y_m,
                             heading_rad=math.remainder(heading_rad, 2.0 * math.pi), covariance=values,
-                            method=self.method, track=messages.Track.LIVE, correction_sequence=sequence)
+                            method=self.method, track=track, correction_sequence=sequence)
 
     def key_for(self, message: Any) -> str:
-        return keys.pose(self.venue, message.agent_id, "live")
+        track = "refined" if message.track == messages.Track.REFINED else "live"
+        return keys.pose(self.venue, message.agent_id, track)

@@ -54,7 +54,7 @@ class VenueHub:
         return out
 
     def flush(self) -> list[Any]:
-        return self.chairs.flush()
+        return self.chairs.flush() + self.pedestrians.flush()
 
     def key_for(self, message: Any) -> str:
         if messages.type_name(message) == "TrackIdentity":

@@ -148,6 +148,24 @@ def test_particle_filter_stays_in_corridors_and_beats_dead_reckoning(paper_walk)
     assert all(np.all(np.linalg.eigvalsh(p.covariance) >= -1e-12) for p in track[1:])
 
 
+def test_refined_track_lags_by_its_steps_stays_walkable_and_is_no_worse(paper_walk):
+    time_ns, truth, poses = paper_walk
+    lag = 15
+    matcher = ParticleMatcher(PAPER_AREA, ParticleSettings(particles=300, seed=0, smoothing_lag_steps=lag))
+    matcher.reset(int(time_ns[0]), *truth[0])
+    live, refined = [], []
+    for pose in poses[1:]:
+        live.append(matcher.update(pose))
+        refined += matcher.refined()
+        assert len(refined) == max(0, len(live) - lag)  # each refined pose `lag` poses behind
+    refined += matcher.flush()
+    assert [p.time_ns for p in refined] == [p.time_ns for p in live]
+    assert PAPER_AREA.is_walkable(*xy(refined)).all()
+    live_error, refined_error = errors_m(live, truth[1:]), errors_m(refined, truth[1:])
+    assert refined_error.mean() <= live_error.mean() and np.percentile(refined_error, 90) <= np.percentile(live_error, 90)
+    assert matcher.lag is not None and matcher.lag.x_m.shape == (lag, 300)
+
+
 U_POINTS = (MapPoint("A", 0.0, 0.0, (0.0,)), MapPoint("B", 20.0, 0.0, (180.0, 90.0)),
             MapPoint("C", 20.0, 4.0, (270.0, 180.0)), MapPoint("D", 0.0, 4.0, (0.0,)))
 

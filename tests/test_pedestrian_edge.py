@@ -161,17 +161,29 @@ def pose(time_s: float, x_m: float, y_m: float, sequence: int = 1):
 def test_hub_restarts_the_matcher_from_the_pose_itself_and_keeps_it_in_the_corridor():
     hub = PedestrianHub(session(floor_plan=True))
     first = hub.on_message(pose(0.0, 2.0, 5.0))  # the first pose after the stand (sequence 1)
-    assert (first[0].x_m, first[0].y_m) == (2.0, 5.0)
+    assert [(p.x_m, p.y_m, p.track) for p in first] == [(2.0, 5.0, messages.Track.LIVE),
+                                                        (2.0, 5.0, messages.Track.REFINED)]
     out = []
     for i in range(1, 30):  # the dead reckoning drifts towards the wall at y 7 (0.2 m per step)
         out += hub.on_message(pose(0.5 * i, 2.0 + 0.7 * i, 5.0 + 0.2 * i))
-    assert all(3.0 < p.y_m < 7.0 for p in out)
-    assert out[-1].x_m > 15.0
+    live = [p for p in out if p.track == messages.Track.LIVE]
+    refined = [p for p in out if p.track == messages.Track.REFINED]
+    assert len(live) == 29 and all(3.0 < p.y_m < 7.0 for p in out)
+    assert live[-1].x_m > 15.0
+    lag = hub.agents["walker"].matcher.refined_lag_steps
+    assert [p.timestamp_ns for p in refined] == [p.timestamp_ns for p in live[:len(live) - lag]]
     assert hub.on_message(pose(1.0, 9.0, 5.0)) == [] and hub.agents["walker"].out_of_order == 1
     restarted = hub.on_message(pose(20.0, 40.0, 4.0, sequence=2))  # a second stand, its scan not yet arrived
-    assert (restarted[0].x_m, restarted[0].y_m, restarted[0].correction_sequence) == (40.0, 4.0, 2)
-    key = hub.key_for(restarted[0])
-    assert key == "reckon/hall/walker/pose/live"
+    finished = [p for p in restarted if p.correction_sequence == 1]  # the old stand's track ends at once
+    assert [p.timestamp_ns for p in finished] == [p.timestamp_ns for p in live[len(live) - lag:]]
+    assert all(p.track == messages.Track.REFINED for p in finished)
+    new = [p for p in restarted if p.correction_sequence == 2]
+    assert [(p.x_m, p.y_m, p.track) for p in new] == [(40.0, 4.0, messages.Track.LIVE),
+                                                      (40.0, 4.0, messages.Track.REFINED)]
+    assert hub.key_for(new[0]) == "reckon/hall/walker/pose/live"
+    assert hub.key_for(new[1]) == "reckon/hall/walker/pose/refined"
+    hub.on_message(pose(20.5, 40.7, 4.0, sequence=2))
+    assert [p.timestamp_ns for p in hub.flush()] == [pose(20.5, 0, 0).timestamp_ns]  # end: what waits comes out
 
 
 def test_hub_without_a_map_passes_poses_on():

@@ -79,6 +79,7 @@ class PhoneRun:
     mount: str
     edge: Track = field(default_factory=Track)
     hub: Track | None = None  # None: no map matcher for this method on this venue
+    refined: Track | None = None  # the hub's pose/refined (a matcher with a lag), else None
     snaps: list[Any] = field(default_factory=list)  # the paper's SnapRecords
 
 
@@ -87,6 +88,7 @@ class WaypointErrors:
     method: str
     map_matching: bool
     matcher: str
+    track: str  # live (the edge's, or the hub's pose/live) or refined (the hub's pose/refined)
     mount: str
     session: str
     errors_m: np.ndarray
@@ -124,7 +126,8 @@ def run_method(session: Session, inputs: list[Any], method: str) -> list[PhoneRu
         estimator = PaperPdr(height_m=agent.height_m) if method == "paper" else None
         edge = PedestrianEdge(agent, session.venue, estimator, method=method, sensor_id=sensor.id)
         hub = PedestrianHub(session, factory, method=method) if factory is not None else None
-        runs[sensor.id] = (PhoneRun(agent.id, sensor.id, sensor.mount.value, hub=Track() if hub else None), edge, hub)
+        runs[sensor.id] = (PhoneRun(agent.id, sensor.id, sensor.mount.value, hub=Track() if hub else None,
+                                    refined=Track() if hub else None), edge, hub)
     for message in inputs:
         if message.sensor_id not in runs:
             continue
@@ -136,13 +139,22 @@ def run_method(session: Session, inputs: list[Any], method: str) -> list[PhoneRu
             continue
         for pose in edge.push(message):
             run.edge.add(pose.timestamp_ns, pose.x_m, pose.y_m, pose.heading_rad)
-            if hub is not None and run.hub is not None:
-                for out in hub.on_message(pose):
-                    run.hub.add(out.timestamp_ns, out.x_m, out.y_m, out.heading_rad)
+            if hub is not None:
+                _take(run, hub.on_message(pose))
     for run, _, hub in runs.values():
         if hub is not None:
+            _take(run, hub.flush())
             run.snaps = list(hub.agents[run.agent_id].snaps)
+            if run.refined is not None and not run.refined.rows:
+                run.refined = None  # this matcher has no refined track
     return [run for run, _, _ in runs.values()]
+
+
+def _take(run: PhoneRun, outputs: list[Any]) -> None:
+    for out in outputs:
+        track = run.refined if out.track == messages.Track.REFINED else run.hub
+        if track is not None:
+            track.add(out.timestamp_ns, out.x_m, out.y_m, out.heading_rad)
 
 
 def read_inputs(path: Path) -> list[Any]:
@@ -164,10 +176,11 @@ def evaluate_pedestrians(sessions: list[tuple[SessionData, Path]],
             runs = run_method(data.session, inputs, method)
             for mount in sorted({run.mount for run in runs}):
                 chosen = [run for run in runs if run.mount == mount]
-                report.rows.append(score(data, path, method, mount, chosen, False, "none"))
-                if all(run.hub is not None for run in chosen):
-                    matcher = "turn snap" if method == "paper" else "particle filter"
-                    report.rows.append(score(data, path, method, mount, chosen, True, matcher))
+                report.rows.append(score(data, path, method, mount, chosen, "edge", "none"))
+                matcher = "turn snap" if method == "paper" else "particle filter"
+                for track in ("live", "refined"):
+                    if all(getattr(run, "hub" if track == "live" else "refined") is not None for run in chosen):
+                        report.rows.append(score(data, path, method, mount, chosen, track, matcher))
             if method == "paper" and not data.session.venue.map_points:
                 no_points.append(path.name)
     if no_points:
@@ -177,13 +190,15 @@ def evaluate_pedestrians(sessions: list[tuple[SessionData, Path]],
     return report
 
 
-def score(data: SessionData, path: Path, method: str, mount: str, runs: list[PhoneRun], map_matching: bool,
+def score(data: SessionData, path: Path, method: str, mount: str, runs: list[PhoneRun], track_name: str,
           matcher: str) -> WaypointErrors:
-    """Waypoint errors (and heading after turns, snaps) of these phones' edge or hub tracks."""
+    """Waypoint errors (and heading after turns, snaps) of these phones' tracks: "edge" (no map
+    matching), or the hub's "live" or "refined"."""
+    map_matching = track_name != "edge"
     errors, heading_errors = [], []
     turns = data.session.source.get("turns", []) if isinstance(data.session.source, dict) else []
     for run in runs:
-        track = run.hub if map_matching and run.hub is not None else run.edge
+        track = {"edge": run.edge, "live": run.hub, "refined": run.refined}[track_name] or run.edge
         truth = data.truth[run.agent_id]
         scans = [s for s in data.scans.get(run.agent_id, []) if s.accepted and s.sensor_id in ("", run.sensor_id)]
         if not scans:
@@ -199,10 +214,11 @@ def score(data: SessionData, path: Path, method: str, mount: str, runs: list[Pho
             true_heading = np.array([_heading_at(truth, t) for t in times])
             heading_errors.append(np.degrees(np.abs(np.remainder(heading - true_heading + math.pi, 2 * math.pi)
                                                     - math.pi)))
-    row = WaypointErrors(method, map_matching, matcher, mount, path.name,
+    row = WaypointErrors(method, map_matching, matcher, "live" if track_name == "edge" else track_name, mount,
+                         path.name,
                          np.concatenate(errors) if errors else np.array([]),
                          np.concatenate(heading_errors) if heading_errors else np.array([]))
-    if map_matching and method == "paper" and turns:
+    if track_name == "live" and method == "paper" and turns:
         row.snaps_correct, row.snaps_total, row.snaps_wrong = _snap_score(
             [t for t in turns if any(t.get("agent_id", r.agent_id) == r.agent_id for r in runs)],
             [(r.agent_id, snap) for r in runs for snap in r.snaps])
@@ -232,12 +248,12 @@ def _snap_score(turns: list[dict], snaps: list[tuple[str, Any]]) -> tuple[int, i
     return correct, len(turns), wrong
 
 
-def pooled(report: PedestrianReport) -> list[tuple[tuple[str, bool, str, str], np.ndarray, np.ndarray,
+def pooled(report: PedestrianReport) -> list[tuple[tuple[str, bool, str, str, str], np.ndarray, np.ndarray,
                                                   list[WaypointErrors]]]:
-    """Rows of every session pooled per (method, map matching, matcher, mount), ordered by mount."""
-    groups: dict[tuple[str, bool, str, str], list[WaypointErrors]] = {}
+    """Rows of every session pooled per (method, map matching, matcher, track, mount), by mount."""
+    groups: dict[tuple[str, bool, str, str, str], list[WaypointErrors]] = {}
     for row in sorted(report.rows, key=lambda r: r.mount):
-        groups.setdefault((row.method, row.map_matching, row.matcher, row.mount), []).append(row)
+        groups.setdefault((row.method, row.map_matching, row.matcher, row.track, row.mount), []).append(row)
     return [(key, np.concatenate([r.errors_m for r in rows]), np.concatenate([r.heading_errors_deg for r in rows]),
              rows) for key, rows in groups.items()]
 
@@ -258,8 +274,9 @@ def _snaps(rows: list[WaypointErrors]) -> dict[str, int] | None:
 
 def to_json(report: PedestrianReport) -> dict[str, Any]:
     results = []
-    for (method, map_matching, matcher, mount), errors, headings, rows in pooled(report):
-        results.append({"method": method, "map_matching": map_matching, "matcher": matcher, "mount": mount,
+    for (method, map_matching, matcher, track, mount), errors, headings, rows in pooled(report):
+        results.append({"method": method, "map_matching": map_matching, "matcher": matcher, "track": track,
+                        "mount": mount,
                         "waypoints": int(len(errors)), "waypoint_error_m": _percentiles(errors),
                         "heading_error_after_turn_deg": _percentiles(headings) if len(headings) else None,
                         "turn_snaps": _snaps(rows),
@@ -271,18 +288,20 @@ def to_table(report: PedestrianReport) -> str:
     fmt = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
     lines = [f"{len(report.sessions)} pedestrian session(s): position error at the truth waypoints after the "
              "first stand (m)",
-             f"{'method':8} {'phone':7} {'map matching':16} {'waypoints':>9} {'median':>7} {'p75':>7} {'p90':>7} "
+             f"{'method':8} {'phone':7} {'map matching':25} {'waypoints':>9} {'median':>7} {'p75':>7} {'p90':>7} "
              f"{'heading after turns p90 deg':>28} {'turn snaps':>18}"]
-    for (method, map_matching, matcher, mount), errors, headings, rows in pooled(report):
+    for (method, map_matching, matcher, track, mount), errors, headings, rows in pooled(report):
         p = _percentiles(errors)
+        matcher = matcher + (", refined" if track == "refined" else "")
         h = _percentiles(headings)["p90"] if len(headings) else None
         snaps = _snaps(rows)
         snap_text = "-" if snaps is None else f"{snaps['correct']}/{snaps['true_turns']}, {snaps['wrong']} wrong"
-        lines.append(f"{method:8} {mount:7} {(matcher if map_matching else 'none'):16} {len(errors):9d} {fmt(p['median']):>7} "
+        lines.append(f"{method:8} {mount:7} {(matcher if map_matching else 'none'):25} {len(errors):9d} {fmt(p['median']):>7} "
                      f"{fmt(p['p75']):>7} {fmt(p['p90']):>7} {fmt(h):>28} {snap_text:>18}")
     if len(report.sessions) > 1:
         lines += ["", "p75 per session (m): " + ", ".join(
-            f"{key[0]}{'+' + key[2] if key[1] else ''} ({key[3]})" for key, *_ in pooled(report))]
+            f"{key[0]}{'+' + key[2] if key[1] else ''}{' refined' if key[3] == 'refined' else ''} ({key[4]})"
+            for key, *_ in pooled(report))]
         by_session: dict[str, list[str]] = {}
         for _, _, _, rows in pooled(report):
             for r in rows:
