@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from protocol.errors import ReckonError
+from protocol.messages import Track
 from protocol.session import AgentKind
 
 log = logging.getLogger("reckon")
@@ -287,7 +288,7 @@ def run_hub_command(args: argparse.Namespace, progress: Callable[[str], None]) -
     latest: dict[str, str] = {}
 
     def show(output: Any) -> None:  # pedestrians' map-matched positions, as they walk
-        if output.DESCRIPTOR.name == "EstimatedPose" and output.agent_id in walkers:
+        if output.DESCRIPTOR.name == "EstimatedPose" and output.agent_id in walkers and output.track == Track.LIVE:
             latest[output.agent_id] = f"{output.agent_id} x {output.x_m:.1f} m y {output.y_m:.1f} m"
             progress("; ".join(latest[agent_id] for agent_id in sorted(latest)))
 
