@@ -207,7 +207,7 @@ def score(data: SessionData, path: Path, method: str, mount: str, runs: list[Pho
         x, y, _ = track.at(truth.time_ns[after])
         errors.append(np.hypot(x - truth.x_m[after], y - truth.y_m[after]))
         agent_turns = [t for t in turns if t.get("agent_id", run.agent_id) == run.agent_id]
-        if agent_turns and np.all(np.isfinite(truth.heading_rad)):
+        if agent_turns and np.all(np.isfinite(truth.heading_rad)) and track_name != "refined":  # it keeps live's
             times = np.array([int(t["time_ns"]) for t in agent_turns]) + int(TURN_SETTLE_S * 1e9)
             times = times[(times > scans[0].timestamp_ns) & (times <= truth.time_ns[-1])]
             _, _, heading = track.at(times)
