@@ -15,10 +15,6 @@ Each row sums `rate / BIN_HZ` samples (10 at 1000 Hz):
                   is about a horizontal axis)
     surge_g       mean forward (body x) specific force, raw: stroke surges show in it
     rate_dps      mean magnitude of the rotation rate (strokes roll the body: never near 0 in a length)
-    acc_x/y/z_g   mean body-frame specific force (g) and ...
-    gyr_x/y/z_dps ... mean body-frame rotation rate, gyroscope offset removed (deg/s): the inputs of the
-                  attitude, kept so that a length can be re-run backwards (edge/swim_attitude.py)
-    q_w/x/y/z     the attitude quaternion (earth from body) at the row's end: the backward pass starts there
 While the AHRS is still settling (its first seconds) head_x/y are 0: no heading, no push-off.
 Pure computation, no I/O; memory is the AHRS state and one row.
 """
@@ -35,13 +31,8 @@ from edge.mounting import seat_to_chair
 
 G = 9.80665
 BIN_HZ = 100.0
-COLUMNS = ("t_ns", "dv_x", "dv_y", "head_x", "head_y", "yaw_dps", "surge_g", "rate_dps",
-           "acc_x_g", "acc_y_g", "acc_z_g", "gyr_x_dps", "gyr_y_dps", "gyr_z_dps", "q_w", "q_x", "q_y", "q_z")
-(T, DV_X, DV_Y, HEAD_X, HEAD_Y, YAW, SURGE, RATE, ACC_X, ACC_Y, ACC_Z, GYR_X, GYR_Y, GYR_Z,
- Q_W, Q_X, Q_Y, Q_Z) = range(len(COLUMNS))
-ACC = [ACC_X, ACC_Y, ACC_Z]
-GYR = [GYR_X, GYR_Y, GYR_Z]
-QUAT = [Q_W, Q_X, Q_Y, Q_Z]
+COLUMNS = ("t_ns", "dv_x", "dv_y", "head_x", "head_y", "yaw_dps", "surge_g", "rate_dps")
+T, DV_X, DV_Y, HEAD_X, HEAD_Y, YAW, SURGE, RATE = range(len(COLUMNS))
 # Fusion's defaults (gain 0.5, acceleration rejection 10 deg, 5 s recovery) suit a body whose
 # accelerations average out over a stroke cycle; the turn and push-off (up to ~1.5 g) are
 # rejected as disagreeing with gravity and do not tilt the estimate.
@@ -84,14 +75,13 @@ class BodyBinner:
         self._count = 0
         self._sum = np.zeros(4)  # earth acc x, earth acc y (g), surge (g), rotation rate (dps)
         self._gyro_sum = np.zeros(3)  # body frame, bias removed (dps)
-        self._accel_sum = np.zeros(3)  # body frame (g)
         self.samples = 0
 
     def push(self, time_ns: np.ndarray, accel_g: np.ndarray, gyro_dps: np.ndarray) -> np.ndarray:
         accel = seat_to_chair(np.asarray(accel_g, dtype=float), self.settings.forward_axis, self.settings.left_axis)
         gyro = seat_to_chair(np.asarray(gyro_dps, dtype=float), self.settings.forward_axis, self.settings.left_axis)
         rows = []
-        ahrs, bias, acc_sum, gyro_sum, accel_sum = self.ahrs, self.bias, self._sum, self._gyro_sum, self._accel_sum
+        ahrs, bias, acc_sum, gyro_sum = self.ahrs, self.bias, self._sum, self._gyro_sum
         for i in range(len(time_ns)):
             corrected = bias.update(gyro[i])
             ahrs.update_no_magnetometer(corrected, accel[i])
@@ -101,7 +91,6 @@ class BodyBinner:
             acc_sum[2] += accel[i, 0]
             acc_sum[3] += math.sqrt(corrected @ corrected)
             gyro_sum += corrected
-            accel_sum += accel[i]
             self._count += 1
             if self._count == self.per_bin:
                 w, x, y, z = ahrs.get_quaternion()
@@ -112,10 +101,9 @@ class BodyBinner:
                 if ahrs.get_flags().startup:
                     head_x = head_y = 0.0
                 rows.append((int(time_ns[i]), acc_sum[0] * G * self.dt, acc_sum[1] * G * self.dt, head_x, head_y,
-                             float(gyro_sum @ up) / n, acc_sum[2] / n, acc_sum[3] / n, *(accel_sum / n), *(gyro_sum / n), w, x, y, z))
+                             float(gyro_sum @ up) / n, acc_sum[2] / n, acc_sum[3] / n))
                 acc_sum[:] = 0.0
                 gyro_sum[:] = 0.0
-                accel_sum[:] = 0.0
                 self._count = 0
         self.samples += len(time_ns)
         return np.array(rows, dtype=float).reshape(-1, len(COLUMNS))

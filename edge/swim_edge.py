@@ -11,6 +11,7 @@ for the next push-off.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -21,7 +22,7 @@ from edge.swim_bins import BIN_HZ, COLUMNS, BinSettings, BodyBinner
 from edge.swim_length import reckon_length
 from edge.swim_paper import LengthEstimate
 from protocol import messages
-from protocol.session import Agent, Route, Sensor
+from protocol.session import Agent, Mount, Route, Sensor
 
 log = logging.getLogger(__name__)
 MAX_LENGTH_S = 300.0  # a 25 m length takes 15-60 s; a 50 m one up to 2 min
@@ -44,6 +45,7 @@ class SwimTracker:
     def __init__(self, sensor: Sensor, pool_length_m: float, route: Route, max_length_s: float = MAX_LENGTH_S):
         self.binner = BodyBinner(BinSettings(sensor.rate_hz, sensor.forward_axis or "+x", sensor.left_axis or "+y"))
         self.pool_length_m, self.route = pool_length_m, route
+        self.board = sensor.mount is Mount.KICKBOARD  # its touch: swim_walls.touch_in
         self.capacity = walls.rows_for(max_length_s + PRE_PUSH_S + TURN_WAIT_S + 5.0)
         self.rows = np.zeros((self.capacity, len(COLUMNS)))
         self.n = 0
@@ -59,7 +61,7 @@ class SwimTracker:
         """End of stream: a length in progress ends at its last rows if the swimmer had stopped."""
         out: list[LengthEstimate] = []
         if self.push is not None and self.reversal is not None:
-            out += self._close(walls.touch_before_turn(self.rows, self.reversal, self.push), self.n - 1)
+            out += self._close(walls.touch_before_turn(self.rows, self.reversal, self.push, self.board), self.n - 1)
         return out
 
     def push_rows(self, new_rows: np.ndarray) -> list[LengthEstimate]:
@@ -86,19 +88,27 @@ class SwimTracker:
             glide = self.push + walls.rows_for(2.0)
             if walls.reversed_at(rows, i, glide):
                 self.reversal = i
-            elif i > glide and walls.still_until(rows, i):
+            elif i - walls.rows_for(walls.STILL_S) >= self.push + walls.rows_for(walls.GLIDE_MAX_S) \
+                    and walls.still_until(rows, i):
                 self.counters.stops += 1
-                return self._close(walls.touch_before_rest(rows, i - walls.rows_for(walls.STILL_S), self.push), i)
+                # The set has ended. Where is the velocity zero: at the touch, where the body stopped
+                # at the wall, or once it is at rest? Coming upright at the wall (70 deg of pitch in
+                # about a second) can tilt the attitude in between, and its leak, spread over the
+                # length, took up to 20-86 % off a length whichever single row was chosen (seeds
+                # 1-2). Take the one whose integration needs the least scaling to the pool length.
+                still_from = i - walls.rows_for(walls.STILL_S)
+                touch = walls.touch_before_rest(rows, still_from, self.push, self.board)
+                return self._close(touch, touch, other_stops=(still_from, i))
             return []
         found = walls.find_push(rows[:i + 1], max(self.reversal, i - walls.rows_for(1.0)), i)
         if found is not None:
             self.counters.turns += 1
-            out = self._close(walls.touch_before_turn(rows, self.reversal, self.push), found[0])
+            out = self._close(walls.touch_before_turn(rows, self.reversal, self.push, self.board), found[0])
             self._start(found[0])
             return out
         if i - self.reversal > walls.rows_for(TURN_WAIT_S):
             self.counters.stops += 1
-            return self._close(walls.touch_before_turn(rows, self.reversal, self.push), i)
+            return self._close(walls.touch_before_turn(rows, self.reversal, self.push, self.board), i)
         return []
 
     def _start(self, push_row: int) -> None:
@@ -108,13 +118,15 @@ class SwimTracker:
         self.push = push_row - keep_from
         self.reversal = None
 
-    def _close(self, touch: int, stop: int) -> list[LengthEstimate]:
+    def _close(self, touch: int, stop: int, other_stops: tuple[int, ...] = ()) -> list[LengthEstimate]:
         push = self.push
         self.push, self.reversal = None, None
         if push is None or not push < touch <= stop:
             self.counters.failed += 1
             return []
-        estimate = reckon_length(self.rows[:self.n], push, touch, stop, self.pool_length_m, self.route)
+        estimates = [reckon_length(self.rows[:self.n], push, touch, zero_at, self.pool_length_m, self.route)
+                     for zero_at in (stop, *other_stops) if touch <= zero_at]
+        estimate = min(estimates, key=_rescaling)
         if not np.isfinite(estimate.swum_distance_m):
             self.counters.failed += 1
             return []
@@ -136,6 +148,12 @@ class SwimTracker:
         log.warning("no wall for %.0f s: dropping the length in progress", self.capacity / BIN_HZ)
         self.push, self.reversal = None, None
         self._shift(self.n - walls.rows_for(PRE_PUSH_S))
+
+
+def _rescaling(estimate: LengthEstimate) -> float:
+    """How far the length's scale to the pool length is from 1 (|log k|; inf if undefined)."""
+    k = estimate.scale
+    return abs(math.log(k)) if math.isfinite(k) and k > 0 else math.inf
 
 
 @dataclass

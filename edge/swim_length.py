@@ -10,9 +10,7 @@ The rows from the push-off (`push`) to the moment the swimmer is still again at 
   sensor's sway across it (a lever arm rolling with the body, at the stroke frequency) and the
   attitude's errors across the track do not add distance.
 Velocities are earth-frame vectors from the quaternion attitude (gravity removed whatever the
-body's roll and pitch), and headings are the quaternion's, not a z gyro's integral. The attitude is
-two-pass (edge/swim_attitude.py): backwards from the touch near the push-off, the causal filter near
-the touch, so neither end's transient reaches into the length; `two_pass=False` keeps the causal one.
+body's roll and pitch), and headings are the quaternion's, not a z gyro's integral.
 """
 
 from __future__ import annotations
@@ -22,7 +20,6 @@ import math
 import numpy as np
 from scipy.signal import butter, find_peaks, sosfiltfilt
 
-from edge.swim_attitude import two_pass as two_pass_attitude
 from edge.swim_bins import DV_X, DV_Y, HEAD_X, HEAD_Y, SURGE, T
 from edge.swim_paper import LengthEstimate, lateral_profile
 from protocol.session import Route, route_end_heading_rad
@@ -55,17 +52,13 @@ def count_strokes(surge_g: np.ndarray, rate_hz: float) -> int:
 
 
 def reckon_length(rows: np.ndarray, push: int, touch: int, stop: int, pool_length_m: float, route: Route,
-                  rate_hz: float = 100.0, two_pass: bool = True) -> LengthEstimate:
+                  rate_hz: float = 100.0) -> LengthEstimate:
     """Our estimate of rows[push..touch], with zero velocity at push and stop."""
     if not push < touch <= stop < len(rows):
         raise ValueError(f"rows push {push} < touch {touch} <= stop {stop} < {len(rows)} do not hold")
     span = rows[push:stop + 1]
-    if two_pass:
-        dv, heading_xy = two_pass_attitude(rows, push, touch, stop)
-    else:
-        dv, heading_xy = span[:, [DV_X, DV_Y]], span[:, [HEAD_X, HEAD_Y]]
     t_s = (span[:, T] - span[0, T]) * 1e-9
-    velocity = np.cumsum(dv, axis=0)
+    velocity = np.cumsum(span[:, [DV_X, DV_Y]], axis=0)
     velocity -= velocity[0]
     drift = velocity[-1] / t_s[-1] if t_s[-1] > 0 else np.zeros(2)
     velocity -= np.outer(t_s, drift)
@@ -73,8 +66,8 @@ def reckon_length(rows: np.ndarray, push: int, touch: int, stop: int, pool_lengt
     velocity, t_s = velocity[:n], t_s[:n]
     # The track's direction: the body's heading without its stroke and breathing oscillations
     # (the head turns to breathe; hips and shoulders sway): a zero-phase low-pass.
-    head = np.column_stack([_lowpass(heading_xy[:n, 0], HEADING_CUTOFF_HZ, rate_hz),
-                            _lowpass(heading_xy[:n, 1], HEADING_CUTOFF_HZ, rate_hz)])
+    head = np.column_stack([_lowpass(span[:n, HEAD_X], HEADING_CUTOFF_HZ, rate_hz),
+                            _lowpass(span[:n, HEAD_Y], HEADING_CUTOFF_HZ, rate_hz)])
     head = head / np.maximum(np.hypot(head[:, 0], head[:, 1]), 1e-9)[:, None]
     # Speed along the heading; the velocity across it is the sensor's sway, not the track.
     speed = np.einsum("ij,ij->i", velocity, head)

@@ -4,11 +4,13 @@ The swimming paper cut its lengths by hand and left detection as future work. Wh
 (algorithms.md, Ganzevles 2017; the simulator's turn, docs/simulator-swim.md):
 - a push-off: the strongest forward acceleration of a length (the legs extend against the wall,
   about 1 g for a few tenths of a second), from near standstill;
-- an open turn: the body's heading reverses (about 180 deg about the vertical) within a second or
-  two, between the touch and the next push-off. Strokes roll the body about its long axis, which
-  is horizontal, so they hardly move the heading; the diagonal route's 35.75 deg turn is far below
-  the threshold;
-- the end of a set: the swimmer stays still at the wall.
+- an open turn: the body turns about 180 deg about the vertical within a second or two, between
+  the touch and the next push-off: the rotation rate about the vertical, integrated over the last
+  few seconds. Strokes roll the body about its long axis, which is horizontal, so they hardly turn
+  it; the diagonal route's 35.75 deg turn is far below the threshold. (The projected heading
+  itself is no good here: a sensor pitched up in the turn's tuck, the head's 10-30 deg tilt plus
+  50 deg, loses it just when it turns.)
+- the end of a set: the swimmer stays still at the wall, and not in the glide after a push-off.
 The touch is where the deceleration into the wall ends (the hand takes the last of the speed),
 just before the turn's rotation or the rest.
 These are pure functions of the rows (index arithmetic on one buffer), no state.
@@ -16,23 +18,27 @@ These are pure functions of the rows (index arithmetic on one buffer), no state.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from edge.swim_bins import BIN_HZ, DV_X, DV_Y, G, HEAD_X, HEAD_Y, RATE, SURGE, YAW
 
 PUSH_G = 0.6  # forward acceleration of a push-off (smoothed over SMOOTH rows)
 PUSH_ONSET_G = 0.1  # where the push-off begins, searching back from its peak
-REVERSAL_DEG = 120.0  # heading change of a turn
+REVERSAL_DEG = 120.0  # rotation about the vertical of a turn, within REVERSAL_S
+REVERSAL_S = 3.0  # seed 1 session, 3 s windows: swimming turns at most 48 deg (waist, back), 91 (head,
+# breathing about a tilted axis), 39 (kickboard); every open turn 178 or more (kickboard: 140)
 TURN_YAW_DPS = 45.0  # rotation rate about the vertical that marks the turn
-STILL_RATE_DPS = 15.0  # at rest: hardly any rotation (strokes roll the body at 50-200 deg/s) ...
-STILL_SURGE_G = 0.03  # ... nor surge (strokes: 0.1-0.5 g)
+# At rest (seed 1 session, 2 s windows): rotation at most 2 deg/s, surge SD at most 0.005 g, every
+# mounting. Swimming: at least 9.5 deg/s and 0.026 g (the kickboard: its board hardly rolls and the
+# kick's surge is small); strokes 20-200 deg/s and 0.08-0.25 g. The thresholds sit between.
+STILL_RATE_DPS = 5.0  # at rest: hardly any rotation ...
+STILL_SURGE_G = 0.012  # ... nor surge
 STILL_S = 2.0
-REFERENCE_S = (5.0, 2.5)  # the heading before a turn: rows this long ago
+GLIDE_MAX_S = 3.5  # push-off (0.35 s) and glide (up to 2.5 s) and the strokes' start: not a rest
 SMOOTH = 10  # rows (0.1 s)
 TOUCH_SEARCH_S = 1.5  # the touch lies this close before the turn's rotation
 TOUCH_END_G = 0.05  # the deceleration into the wall has ended
+BOARD_TOUCH_G = 0.2  # a kickboard's stop at the wall (kicking: within +-0.1 g)
 VALID_HEADING = 0.5  # forward axis projection below this: pointing up or down, heading undefined
 
 
@@ -71,29 +77,13 @@ def find_push(rows: np.ndarray, first: int, last: int) -> tuple[int, int] | None
     return lo + onset, lo + peak
 
 
-def heading(rows: np.ndarray, first: int, last: int) -> float | None:
-    """Circular mean heading over rows[first..last] where it is defined, or None."""
-    part = rows[max(0, first):last + 1]
-    if not len(part):
-        return None
-    norm = np.hypot(part[:, HEAD_X], part[:, HEAD_Y])
-    good = part[norm >= VALID_HEADING]
-    if len(good) < len(part) // 2:
-        return None
-    return math.atan2(float(good[:, HEAD_Y].sum()), float(good[:, HEAD_X].sum()))
-
-
 def reversed_at(rows: np.ndarray, i: int, since: int) -> bool:
-    """Has the heading at row i turned by more than REVERSAL_DEG from its value a few seconds
-    before (never looking before row `since`, the length's glide)?"""
-    far, near = rows_for(REFERENCE_S[0]), rows_for(REFERENCE_S[1])
-    if i - far < since:
+    """Has the body turned by more than REVERSAL_DEG about the vertical over the REVERSAL_S up to
+    row i (never looking before row `since`, the length's glide)?"""
+    first = i + 1 - rows_for(REVERSAL_S)
+    if first < since or first < 0:
         return False
-    before = heading(rows, i - far, i - near)
-    now = heading(rows, i - rows_for(0.3), i)
-    if before is None or now is None:
-        return False
-    return abs(math.degrees(math.remainder(now - before, 2 * math.pi))) > REVERSAL_DEG
+    return abs(float(rows[first:i + 1, YAW].sum())) / BIN_HZ > REVERSAL_DEG
 
 
 def still_until(rows: np.ndarray, i: int) -> bool:
@@ -116,24 +106,33 @@ def rotation_onset(rows: np.ndarray, event: int, since: int) -> int:
     return since + start
 
 
-def touch_in(rows: np.ndarray, first: int, last: int) -> int:
+def touch_in(rows: np.ndarray, first: int, last: int, board: bool = False) -> int:
     """The wall touch in rows[first..last]: the hand takes the last of the speed, a deceleration
     that ends when the body has stopped at the wall: the strongest deceleration in the window, then
-    forward to where it has ended."""
+    forward to where it has ended. A kickboard (`board`) is pulled in to the body after the touch,
+    a second deceleration of the board, often the stronger: its touch is where the first
+    deceleration of at least BOARD_TOUCH_G stops deepening and eases (its first local maximum)."""
     first = max(first, 0)
     accel = forward_accel_g(rows[first:last + 1])
     if not len(accel):
         return last
+    if board and (accel <= -BOARD_TOUCH_G).any():
+        touch = int(np.argmax(accel <= -BOARD_TOUCH_G))
+        while touch + 1 < len(accel) and accel[touch + 1] <= accel[touch]:
+            touch += 1  # to the deepest point
+        while touch + 1 < len(accel) and accel[touch + 1] > accel[touch] and accel[touch] < -TOUCH_END_G:
+            touch += 1  # easing, until it deepens again (the pull-in) or has ended
+        return first + touch
     touch = int(np.argmin(accel))
     while touch + 1 < len(accel) and accel[touch + 1] < -TOUCH_END_G:
         touch += 1
     return first + touch
 
 
-def touch_before_turn(rows: np.ndarray, reversal: int, since: int) -> int:
+def touch_before_turn(rows: np.ndarray, reversal: int, since: int, board: bool = False) -> int:
     onset = rotation_onset(rows, reversal, since)
-    return touch_in(rows, max(since, onset - rows_for(TOUCH_SEARCH_S)), onset)
+    return touch_in(rows, max(since, onset - rows_for(TOUCH_SEARCH_S)), onset, board)
 
 
-def touch_before_rest(rows: np.ndarray, still_from: int, since: int) -> int:
-    return touch_in(rows, max(since, still_from - rows_for(TOUCH_SEARCH_S + 1.0)), still_from)
+def touch_before_rest(rows: np.ndarray, still_from: int, since: int, board: bool = False) -> int:
+    return touch_in(rows, max(since, still_from - rows_for(TOUCH_SEARCH_S + 1.0)), still_from, board)

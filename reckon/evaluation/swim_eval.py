@@ -7,6 +7,8 @@
 Distances are scored per length against the simulator's truth (TruthLength: the body centre's
 path from push-off to touch). Wall detection is scored on the touches: a detected touch within
 MATCH_S of a true one is a hit (one to one, nearest first); timing error is |detected - true|.
+`turns` pools every sensor of the session (all mountings and strokes); the issue's turn goal is
+stated for the paper's setting, the waist sensor, so `turns_by_mounting` gives each mounting's own.
 """
 
 from __future__ import annotations
@@ -83,6 +85,7 @@ class SwimReport:
     pool_length_m: float
     lengths: list[LengthScore] = field(default_factory=list)
     turns: TurnScore = field(default_factory=TurnScore)
+    turns_by_mounting: dict[str, TurnScore] = field(default_factory=lambda: defaultdict(TurnScore))
     missed: dict[str, int] = field(default_factory=lambda: defaultdict(int))  # mounting -> lengths not found
     problems: list[str] = field(default_factory=list)
 
@@ -147,9 +150,10 @@ def _true_walls(report: SwimReport, rows: np.ndarray, truth: list[Any], pool: fl
 
 
 def _score_detected(report: SwimReport, detected: list[Any], truth: list[Any], common: dict[str, Any]) -> None:
-    turns = report.turns
-    turns.true_walls += len(truth)
-    turns.detected += len(detected)
+    scores = (report.turns, report.turns_by_mounting[common["mounting"]])
+    for turns in scores:
+        turns.true_walls += len(truth)
+        turns.detected += len(detected)
     pairs = sorted((abs(d.end_ns - t.timestamp_ns), i, j) for i, d in enumerate(detected) for j, t in enumerate(truth))
     used_d: set[int] = set()
     used_t: set[int] = set()
@@ -158,9 +162,10 @@ def _score_detected(report: SwimReport, detected: list[Any], truth: list[Any], c
             continue
         used_d.add(i)
         used_t.add(j)
-        turns.matched += 1
-        turns.timing_errors_s.append(gap * 1e-9)
-        turns.push_errors_s.append(abs(detected[i].start_ns - truth[j].start_ns) * 1e-9)
+        for turns in scores:
+            turns.matched += 1
+            turns.timing_errors_s.append(gap * 1e-9)
+            turns.push_errors_s.append(abs(detected[i].start_ns - truth[j].start_ns) * 1e-9)
         report.lengths.append(LengthScore("reckon", index=j + 1, truth_m=truth[j].swum_distance_m,
                                           estimate_m=detected[i].swum_distance_m, **common))
     report.missed[common["mounting"]] += len(truth) - len(used_t)
@@ -183,16 +188,20 @@ def to_json(report: SwimReport) -> dict[str, Any]:
             **({"paper_reported_m": list(PAPER_REPORTED_M[(mounting, route)])}
                if method == "paper" and (mounting, route) in PAPER_REPORTED_M else {}),
         })
-    t = report.turns
     return {
         "session": str(report.session_path),
         "results": results,
-        "turns": {"precision": _r(t.precision, 4), "recall": _r(t.recall, 4),
-                  "timing_error_s_p90": _r(t.p90(t.timing_errors_s)), "push_off_error_s_p90": _r(t.p90(t.push_errors_s)),
-                  "true_walls": t.true_walls, "detected": t.detected, "matched": t.matched,
-                  "missed": t.true_walls - t.matched, "false": t.detected - t.matched},
+        "turns": _turns_json(report.turns),
+        "turns_by_mounting": {mounting: _turns_json(t) for mounting, t in sorted(report.turns_by_mounting.items())},
         "problems": report.problems,
     }
+
+
+def _turns_json(t: TurnScore) -> dict[str, Any]:
+    return {"precision": _r(t.precision, 4), "recall": _r(t.recall, 4),
+            "timing_error_s_p90": _r(t.p90(t.timing_errors_s)), "push_off_error_s_p90": _r(t.p90(t.push_errors_s)),
+            "true_walls": t.true_walls, "detected": t.detected, "matched": t.matched,
+            "missed": t.true_walls - t.matched, "false": t.detected - t.matched}
 
 
 def to_table(report: SwimReport) -> str:
@@ -207,12 +216,15 @@ def to_table(report: SwimReport) -> str:
         lines.append(f"{method:19} {stroke:12} {mounting:9} {route:8} {len(scores):3d} {errors.mean():10.2f} "
                      f"{np.abs(errors).max():11.2f} {min(est):6.2f}-{max(est):6.2f} {min(tru):6.2f}-{max(tru):6.2f} "
                      + (f"{reported[0]:6.2f}-{reported[1]:6.2f}" if reported else f"{'-':>15}"))
-    t = report.turns
     fmt = lambda v: "-" if v is None else f"{v:.3f}"  # noqa: E731
-    lines += ["", f"walls (touches) from the sensors, no truth given: {t.true_walls} true, {t.detected} detected, "
-                  f"{t.matched} matched within {MATCH_S:g} s: precision {fmt(t.precision)}, recall {fmt(t.recall)}, "
-                  f"touch timing p90 {fmt(t.p90(t.timing_errors_s))} s, push-off timing p90 "
-                  f"{fmt(t.p90(t.push_errors_s))} s"]
+
+    def turn_line(name: str, t: TurnScore) -> str:
+        return (f"{name}: {t.true_walls} true, {t.detected} detected, {t.matched} matched within {MATCH_S:g} s: "
+                f"precision {fmt(t.precision)}, recall {fmt(t.recall)}, touch timing p90 "
+                f"{fmt(t.p90(t.timing_errors_s))} s, push-off timing p90 {fmt(t.p90(t.push_errors_s))} s")
+
+    lines += ["", turn_line("walls (touches) from the sensors, no truth given, every sensor pooled", report.turns)]
+    lines += [turn_line(f"  {mounting}", t) for mounting, t in sorted(report.turns_by_mounting.items())]
     for problem in report.problems:
         lines.append(f"note: {problem}")
     return "\n".join(lines)
