@@ -41,19 +41,28 @@ class Ring:
     def __init__(self, names: tuple[str, ...], capacity: int = CAPACITY):
         self.capacity = capacity
         self.bins = np.full(capacity, NO_BIN, dtype=np.int64)
-        self.values = {name: np.full(capacity, np.nan) for name in names}
+        self.row = {name: k for k, name in enumerate(names)}
+        self.data = np.full((len(names), capacity), np.nan)  # one row per name
 
     def put(self, bin_number: int, **values: float) -> None:
         slot = bin_number % self.capacity
-        self.bins[slot] = bin_number
+        if self.bins[slot] != bin_number:
+            self.bins[slot] = bin_number
+            self.data[:, slot] = np.nan  # what an older bin left there is not this bin's
         for name, value in values.items():
-            self.values[name][slot] = value
+            self.data[self.row[name], slot] = value
+
+    def block(self, first_bin: int, count: int) -> np.ndarray:
+        """Every signal at bins first_bin .. first_bin + count - 1, (names, count); NaN where a bin is missing."""
+        wanted = np.arange(first_bin, first_bin + count)
+        slots = wanted % self.capacity
+        return np.where(self.bins[slots] == wanted, self.data[:, slots], np.nan)
 
     def window(self, name: str, first_bin: int, count: int) -> np.ndarray:
         """Values of bins first_bin .. first_bin + count - 1; NaN where a bin is missing."""
         wanted = np.arange(first_bin, first_bin + count)
         slots = wanted % self.capacity
-        return np.where(self.bins[slots] == wanted, self.values[name][slots], np.nan)
+        return np.where(self.bins[slots] == wanted, self.data[self.row[name], slots], np.nan)
 
 
 def _alpha(tau_s: float, dt_s: float) -> float:
@@ -214,3 +223,29 @@ class TrackCues:
         angle = np.degrees(np.arctan2(px * vy - py * vx, px * vx + py * vy))
         moving = (np.hypot(vx, vy) > MOVING_MPS) & (np.hypot(px, py) > MOVING_MPS)
         return np.where(moving, angle / (TURN_BINS * BIN_S), np.nan)
+
+
+def track_hop_cues(tracks: list[TrackCues], first_bin: int, count: int) -> dict[str, np.ndarray]:
+    """speed, yaw (as TrackCues.speed / .turn_rate), x and y of several tracks at once, each (tracks, count):
+    one block read per track instead of one per signal and shift."""
+    blocks = np.stack([t.ring.block(first_bin - TURN_BINS, TURN_BINS + count) for t in tracks])
+    now, before = blocks[:, :, TURN_BINS:], blocks[:, :, :count]
+    vx, vy, px, py = now[:, 2], now[:, 3], before[:, 2], before[:, 3]
+    speed = np.hypot(vx, vy)
+    angle = np.degrees(np.arctan2(px * vy - py * vx, px * vx + py * vy))
+    with np.errstate(invalid="ignore"):
+        moving = (speed > MOVING_MPS) & (np.hypot(px, py) > MOVING_MPS)
+    return {"speed": speed, "yaw": np.where(moving, angle / (TURN_BINS * BIN_S), np.nan), "x": now[:, 0], "y": now[:, 1]}
+
+
+def agent_hop_blocks(agents: list[AgentCues], first_bin: int, count: int, delay_bins: int) -> dict[str, np.ndarray]:
+    """The agents' signals for track bins first..first+count-1, each (agents, count): `activity` at those
+    bins; `speed_dr`, `yaw_dr` (DR heading) and `yaw` (gyro heading) delay_bins earlier (turn rates over
+    TURN_BINS, as turn_rate)."""
+    start = first_bin - delay_bins
+    blocks = np.stack([a.ring.block(start - TURN_BINS, TURN_BINS + delay_bins + count) for a in agents])
+    now = blocks[:, :, TURN_BINS:TURN_BINS + count]
+    before = blocks[:, :, :count]
+    rate = 1.0 / (TURN_BINS * BIN_S)
+    return {"activity": blocks[:, 0, TURN_BINS + delay_bins:], "speed_dr": now[:, 2],
+            "yaw_dr": (now[:, 3] - before[:, 3]) * rate, "yaw": (now[:, 1] - before[:, 1]) * rate}
