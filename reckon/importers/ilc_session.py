@@ -125,6 +125,7 @@ def import_walks(paths: list[Path], output: Path) -> list[IlcImport]:
     """Several walks: `output` is a folder (one `<walk>.mcap` each); one walk may name a file."""
     if len(paths) == 1 and output.suffix == ".mcap":
         return [import_ilc(paths[0], output)]
-    if not output.is_dir():
+    if output.exists() and not output.is_dir():
         raise InputError(f"{output}: not a folder; with several walks, -o names the folder for their logs")
+    output.mkdir(parents=True, exist_ok=True)
     return [import_ilc(path, output / f"{path.name.split('.')[0]}.mcap") for path in paths]
