@@ -34,10 +34,9 @@ from typing import Any, Callable
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from hub.clocks import ClockOffsets
+from hub.identity_assign import BIG, components, exclusion_margin, padded, swap_bound
 from hub.identity_cues import (BIN_NS, BIN_S, MOVING_MPS, TRACK_DELAY_BINS, TURN_BINS, AgentCues, SpeedModel,
                                TrackCues, agent_hop_blocks, track_hop_cues)
 from protocol import messages
@@ -45,7 +44,6 @@ from protocol.messages import CorrectionKind
 from protocol.session import AgentKind, Mount, Session
 
 METHOD = "reckon"
-BIG = 1e6
 
 
 @dataclass(frozen=True)
@@ -534,12 +532,12 @@ class IdentityEngine:
         held = {t.agent for k, t in self.tracks.items() if k[0] != camera and t.agent >= 0}
         for i in held:  # an agent another camera holds is not available here
             cost[:, i] = BIG
-        parts = self._components(cost)
+        parts = components(cost, s.nobody_cost)
         self.counters.solves += 1
         chosen: dict[int, int] = {}
         where: dict[int, tuple] = {}  # row -> its part's (matrix, best cost, row in it, agent -> column, solution)
         for rows_in, cols_in in parts:
-            matrix = self._matrix(cost[np.ix_(rows_in, cols_in)])
+            matrix = padded(cost[np.ix_(rows_in, cols_in)], s.nobody_cost)
             self.counters.max_assignment_size = max(self.counters.max_assignment_size, len(matrix))
             rows, cols = linear_sum_assignment(matrix)
             best = float(matrix[rows, cols].sum())
@@ -557,12 +555,12 @@ class IdentityEngine:
                 # a new identity must beat every assignment without it by claim_margin: two people
                 # standing still look alike, and no identity is better than a guess
                 matrix, best, k, column_of, solution = where[row]
-                if self._swap_bound(matrix, solution, k, column_of[agent]) < s.claim_margin:
+                if swap_bound(matrix, solution, k, column_of[agent]) < s.claim_margin:
                     agent = -1  # one exchange with another pair already costs less than the margin: no solve
                     self.counters.screened += 1
                 else:
                     solves += 1
-                    if solves > s.max_claims or self._exclusion_margin(matrix, best, k, column_of[agent]) < s.claim_margin:
+                    if solves > s.max_claims or exclusion_margin(matrix, best, k, column_of[agent]) < s.claim_margin:
                         agent = -1
                     self.counters.solves += solves <= s.max_claims
             final[row] = agent
@@ -582,53 +580,6 @@ class IdentityEngine:
             if agent >= 0:
                 out.append(self._identity(agent, camera, key[1], self._margin(evidence, row, agent), now_ns))
         return out
-
-    def _components(self, cost: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """The assignment splits into independent parts: a pair costing 2 x nobody_cost or more is never
-        needed (its track and agent can both take "nobody" for no more), so only cheaper pairs link
-        tracks and agents; each connected part (rows, columns) is solved alone, with the same optimum."""
-        n_tracks, n_agents = cost.shape
-        linked = cost < 2 * self.settings.nobody_cost
-        rows, cols = np.nonzero(linked)
-        if not len(rows):
-            return []
-        graph = coo_matrix((np.ones(len(rows)), (rows, n_tracks + cols)), shape=(n_tracks + n_agents,) * 2)
-        _, label = connected_components(graph, directed=False)
-        parts = []
-        for part in np.unique(label[rows]):
-            members = np.flatnonzero(label == part)
-            parts.append((members[members < n_tracks], members[members >= n_tracks] - n_tracks))
-        return parts
-
-    def _matrix(self, cost: np.ndarray) -> np.ndarray:
-        """Tracks x agents, padded with a "nobody" column per track and a "nobody" row per agent."""
-        n_tracks, n_agents = cost.shape
-        size = n_tracks + n_agents
-        matrix = np.full((size, size), BIG)
-        matrix[:n_tracks, :n_agents] = cost
-        matrix[:n_tracks, n_agents:][np.diag_indices(n_tracks)] = self.settings.nobody_cost
-        matrix[n_tracks:, :n_agents][np.diag_indices(n_agents)] = self.settings.nobody_cost
-        matrix[n_tracks:, n_agents:] = 0.0
-        return matrix
-
-    @staticmethod
-    def _swap_bound(matrix: np.ndarray, solution: np.ndarray, row: int, col: int) -> float:
-        """An upper bound on _exclusion_margin, O(size): the cheapest exchange of this pair's row or column
-        with another pair of the solution (a "nobody" included), which is one assignment without it."""
-        others = np.arange(len(matrix))
-        change = matrix[row, solution] + matrix[:, col] - matrix[row, col] - matrix[others, solution]
-        change[row] = np.inf
-        return float(change.min())
-
-    @staticmethod
-    def _exclusion_margin(matrix: np.ndarray, best: float, row: int, col: int) -> float:
-        """How much worse the best assignment gets when this pair is forbidden."""
-        saved = matrix[row, col]
-        matrix[row, col] = BIG
-        rows, cols = linear_sum_assignment(matrix)
-        cost = float(matrix[rows, cols].sum())
-        matrix[row, col] = saved
-        return cost - best
 
     def _margin(self, evidence: np.ndarray, row: int, agent: int) -> float:
         others = np.concatenate([np.delete(evidence[:, agent], row), np.delete(evidence[row], agent),

@@ -149,25 +149,28 @@ def test_a_new_track_where_the_hub_expects_someone_else_too_is_left_to_the_evide
 def test_assignment_in_parts_and_the_exchange_bound_agree_with_the_whole_problem():
     from scipy.optimize import linear_sum_assignment
 
+    from hub.identity_assign import components, exclusion_margin, padded, swap_bound
+
     engine = IdentityEngine(session(["a", "b"]))
+    nobody = engine.settings.nobody_cost
     rng = np.random.default_rng(7)
     for _ in range(200):
         n_tracks, n_agents = rng.integers(1, 9, 2)
         cost = rng.uniform(-1.0, 3.0, (n_tracks, n_agents))
-        whole = engine._matrix(cost)
+        whole = padded(cost, nobody)
         rows, cols = linear_sum_assignment(whole)
         best = whole[rows, cols].sum()
         total = (n_tracks + n_agents) * 0.0
-        for part_rows, part_cols in engine._components(cost):
-            matrix = engine._matrix(cost[np.ix_(part_rows, part_cols)])
+        for part_rows, part_cols in components(cost, nobody):
+            matrix = padded(cost[np.ix_(part_rows, part_cols)], nobody)
             r, c = linear_sum_assignment(matrix)
             total += matrix[r, c].sum() - engine.settings.nobody_cost * 0  # parts' own nobodies included
             for k in range(len(part_rows)):
                 if c[k] < len(part_cols):  # a pair of the solution: the bound never undercuts the exact margin
-                    exact = engine._exclusion_margin(matrix, matrix[r, c].sum(), k, c[k])
-                    assert engine._swap_bound(matrix, c, k, c[k]) >= exact - 1e-9
-        linked = {int(t) for part_rows, _ in engine._components(cost) for t in part_rows}
-        linked_agents = {int(a) for _, part_cols in engine._components(cost) for a in part_cols}
+                    exact = exclusion_margin(matrix, matrix[r, c].sum(), k, c[k])
+                    assert swap_bound(matrix, c, k, c[k]) >= exact - 1e-9
+        linked = {int(t) for part_rows, _ in components(cost, nobody) for t in part_rows}
+        linked_agents = {int(a) for _, part_cols in components(cost, nobody) for a in part_cols}
         # what no part holds takes "nobody" on its own
         total += engine.settings.nobody_cost * ((n_tracks - len(linked)) + (n_agents - len(linked_agents)))
         assert abs(total - best) < 1e-9
