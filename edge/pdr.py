@@ -6,8 +6,8 @@ rad/s, magnetometer uT, in the phone frame (x right, y to the top of the screen,
   Euler angles) fed with the gyro after Fusion's offset algorithm (`imufusion.Bias`: re-learns the
   gyro bias whenever the phone is still). Levelled from gravity on the first sample.
 - Steps: edge/pdr_steps.py (peaks of low-passed |a|); step length = K * Weinberg amplitude, K a
-  per-user state re-learned between two calibration stands (distance between them / sum of
-  amplitudes, bounded to [k_min, k_max] and smoothed).
+  per-user state re-learned between two calibration stands (surveyed over dead-reckoned
+  displacement between them, bounded to [k_min, k_max] and smoothed).
 - Walking direction: the heading of the device's forward axis (settings.forward_axis, +y for a
   phone held flat in front), averaged over the step as a unit vector (the body sways +-5 deg
   within a stride). With `direction_from_acceleration` (a pocket), plus the walking direction
@@ -35,10 +35,10 @@ from edge import pdr_direction, pdr_steps
 from edge.pdr_direction import DirectionSettings, DirectionState
 from edge.pdr_magnetic import MagneticAid, MagneticSettings, VenueField
 from edge.pdr_steps import StepSettings, StepState
+from protocol.messages import STANDARD_GRAVITY_MS2
 
 DEGREES_PER_RADIAN = 180.0 / math.pi
 STAND_AXIS = np.array([0.0, 1.0, 0.0])  # a stand's corner holds the phone flat, its top (+y) at the stand's heading
-STANDARD_GRAVITY_MS2 = 9.80665
 
 
 @dataclass(frozen=True)
@@ -82,8 +82,8 @@ class PdrSettings:
     # Extra per-step heading noise when the direction is read from the acceleration (its spread
     # between steps, and the sign's chance to be wrong, are larger than a held phone's axis).
     direction_heading_sd_rad: float = 0.05
-    # K (m per Weinberg unit): 0.38 from ILC walks 1-3 (docs/pdr-estimator.md) left walks 1-5 about
-    # 14 % short; 0.43 is the best of 0.38-0.46 on walks 1-5. Re-learned per user between stands.
+    # K (m per Weinberg unit): 0.43, the best of 0.38-0.46 on ILC walks 1-5 (0.38 left them about
+    # 14 % short; docs/pdr-estimator.md). Re-learned per user between stands.
     step_gain_m: float = 0.43
     step_gain_min_m: float = 0.25  # bounds of a learned K: steps 0.35-1.0 m for typical amplitudes
     step_gain_max_m: float = 0.6

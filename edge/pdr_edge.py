@@ -23,10 +23,9 @@ import numpy as np
 from edge.pdr import PdrEstimator, PdrSettings, PdrStep, PhoneSample
 from edge.pdr_magnetic import VenueField
 from protocol import messages
+from protocol.messages import STANDARD_GRAVITY_MS2, UT_PER_GAUSS
 from protocol.session import Agent, Mount, Sensor, Venue
 
-STANDARD_GRAVITY_MS2 = 9.80665
-UT_PER_GAUSS = 100.0
 METHOD = "reckon"
 
 
@@ -60,7 +59,6 @@ class PedestrianEdge:
             raise ValueError(f"agent {agent.id} has no sensor {sensor_id!r}")
         self.agent_id = agent.id
         self.sensor_id = phone.id
-        self.mount = phone.mount
         self.estimator = estimator if estimator is not None else PdrEstimator(_settings_for(phone), venue_field(venue))
         self.method = method
         self.resets = 0

@@ -73,8 +73,8 @@ import numpy as np
 
 from edge.pdr import PdrStep, PhoneSample, wrap
 from protocol.errors import ConfigError
+from protocol.messages import STANDARD_GRAVITY_MS2
 
-STANDARD_GRAVITY_MS2 = 9.80665
 GIMBAL_WARNING_COS = math.cos(math.radians(80.0))  # |pitch| within 10 deg of 90: counted
 EQ1_GAIN = 18.59  # eq. 1 via [4]: cadence (steps/min) = 18.59 * speed (m/min) ** 0.42
 EQ1_EXPONENT = 0.42

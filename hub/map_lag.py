@@ -12,9 +12,9 @@ per resample.
 
 from __future__ import annotations
 
-import numpy as np
-
 from typing import Callable
+
+import numpy as np
 
 from hub.map_matching import MatchedPose
 

@@ -81,12 +81,14 @@ def particle_matcher_factory(venue: Venue) -> Callable[[str], MapMatcher] | None
 class PedestrianHub:
     """`on_message(message) -> outputs` (EstimatedPose, track LIVE), `key_for(output)`."""
 
-    def __init__(self, session: Session, matcher_factory: Callable[[str], MapMatcher] | None | str = "particles",
+    def __init__(self, session: Session, matcher_factory: Callable[[str], MapMatcher] | None = None,
                  method: str = METHOD):
+        """`matcher_factory(agent_id)`: each pedestrian's matcher; None: ours over the venue's map
+        (particle_matcher_factory), and none where the venue has no map."""
         self.venue = session.venue.name
-        factory = particle_matcher_factory(session.venue) if matcher_factory == "particles" else matcher_factory
+        factory = matcher_factory if matcher_factory is not None else particle_matcher_factory(session.venue)
         self.method = method
-        self.agents = {agent.id: PedestrianView(agent.id, factory(agent.id) if callable(factory) else None)
+        self.agents = {agent.id: PedestrianView(agent.id, factory(agent.id) if factory is not None else None)
                        for agent in session.agents if agent.kind is AgentKind.PEDESTRIAN}
 
     def on_message(self, message: Any) -> list[Any]:

@@ -20,6 +20,9 @@ import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 SCHEMA_VERSION = 1
+# The wire's units (g, gauss) against the SI ones phones and recorders report (m/s^2, uT).
+STANDARD_GRAVITY_MS2 = 9.80665
+UT_PER_GAUSS = 100.0
 PACKAGE = "reckon.v1"
 
 _F = descriptor_pb2.FieldDescriptorProto

@@ -13,7 +13,6 @@ from typing import Any
 
 from protocol.errors import InputError
 
-UT_PER_GAUSS = 100.0
 DEG_PER_RAD = 180.0 / math.pi
 MAX_TEXT_CHARS = 1 << 20  # a WebSocket message or push body larger than this is refused unread
 MAX_SAMPLES_PER_MESSAGE = 5000  # 50 s at 100 Hz: more in one message is not a phone's batch

@@ -26,9 +26,9 @@ import numpy as np
 
 from protocol import messages
 from protocol.errors import ConfigError
-from reckon.phone_parse import UT_PER_GAUSS, Sample
+from protocol.messages import STANDARD_GRAVITY_MS2, UT_PER_GAUSS
+from reckon.phone_parse import Sample
 
-STANDARD_GRAVITY_MS2 = 9.80665
 # |a| averaged over a window: gravity in m/s^2 is 9.8; the same in g is 1. Walking swings |a| by
 # +-50 %, so the bands are wide; between them nothing can be told and the window is refused.
 MS2_BAND = (6.0, 14.0)

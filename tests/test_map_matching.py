@@ -25,7 +25,7 @@ import shapely
 from hub.map_matching import DeadReckonedPose, MatchedPose, SnapStage
 from hub.map_particles import ParticleMatcher, ParticleSettings
 from hub.map_snap_paper import PaperSnapMatcher, PaperSnapSettings
-from hub.walkable import WalkableArea, corridor_graph, corridors_geometry, floor_plan_geometry
+from hub.walkable import WalkableArea, corridor_graph, floor_plan_geometry
 from protocol.session import MapPoint, Venue
 
 

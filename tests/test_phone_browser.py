@@ -18,7 +18,7 @@ import segno
 from PIL import Image
 
 from protocol.session import load_toml
-from reckon.phone_samples import STANDARD_GRAVITY_MS2
+from protocol.messages import STANDARD_GRAVITY_MS2
 from reckon.phone_server import PhoneSource
 from test_phone_server import TIMEOUT_S, batch_times, entrance_code, make_venue
 

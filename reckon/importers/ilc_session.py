@@ -24,6 +24,7 @@ import numpy as np
 
 from protocol import keys, messages
 from protocol.errors import InputError
+from protocol.messages import STANDARD_GRAVITY_MS2
 from protocol.session import session_from_dict
 from reckon.importers.geomagnetic import venue_field
 from reckon.importers.ilc import IlcWalk, floor_centre_lonlat, floor_plan_metres, read_ilc
@@ -33,7 +34,6 @@ from reckon.importers.writing import Stamped, imu_messages, truth_message, write
 
 AGENT_ID = "walker"
 SENSOR_ID = "phone"
-STANDARD_GRAVITY_MS2 = 9.80665
 # How far the bearing to the second waypoint may be from where the phone points: the surveyor's
 # path between waypoints 5-15 m apart curves, and a hand-held phone points up to about 10 deg off
 # the walking direction. An assumption, not a measurement; a real stand is known to about 3 deg.

@@ -29,6 +29,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation
 
+from protocol.messages import STANDARD_GRAVITY_MS2 as STANDARD_GRAVITY
 from protocol.session import Mount, Stand
 from sim_devices.common import small_rotation
 from sim_devices.pedestrian.params import PedestrianParams
@@ -37,7 +38,6 @@ from sim_devices.pedestrian.person import Person
 from sim_devices.pedestrian.timeline import Timeline
 from sim_devices.room.imu import angular_rate
 
-STANDARD_GRAVITY = 9.80665
 GRIP_CHANGE_S = 0.6  # a new grip is taken over this long
 WANDER_TONES = 5  # sinusoids making up the slow hand wander, 0.2-2 Hz
 THIGH_FRONT_M = 0.07  # the pocket lies on the front of the thigh, this far from its axis (half a thigh depth)
