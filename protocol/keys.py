@@ -51,6 +51,11 @@ def scan(venue: str, agent: str) -> str:
     return f"{ROOT}/{venue}/{agent}/event/scan"
 
 
+def status(venue: str, agent: str, sensor: str) -> str:
+    """A device's health (DeviceStatus), from its edge."""
+    return f"{ROOT}/{venue}/{agent}/status/{sensor}"
+
+
 def pose(venue: str, agent: str, track: str = "live") -> str:
     return f"{ROOT}/{venue}/{agent}/pose/{track}"
 

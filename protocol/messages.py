@@ -245,6 +245,29 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         # approximate stand (a surveyed waypoint standing in for one) says how approximate.
         ("heading_sd_rad", "double", False),
     ],
+    # Edge -> hub, about once a second per sensor and at once on a change of health: how the
+    # device is doing (the live court view's status column, `reckon doctor`). timestamp_ns is the
+    # edge host's clock (venue clock). Counters are totals since the edge started; `flags` names
+    # what is wrong now, each one of: disconnected, stale, stuck, saturated, clock_jump,
+    # out_of_order, duplicate, gap, spooling.
+    "DeviceStatus": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("sensor_id", "string", False),
+        ("connected", "bool", False),
+        ("battery_pct", "float", False),  # -1: unknown
+        ("last_sample_age_s", "float", False),  # since the last sample arrived; -1: none yet
+        ("samples", "int64", False),
+        ("gaps", "uint32", False),  # batches missing by sequence
+        ("duplicates", "uint32", False),
+        ("out_of_order", "uint32", False),
+        ("clock_jumps", "uint32", False),
+        ("saturated", "uint32", False),  # samples at a full-scale limit
+        ("reconnects", "uint32", False),
+        ("spooled", "uint32", False),  # messages waiting in the edge's disk spool for the bus
+        ("flags", "string", True),
+    ],
     "TruthContact": [
         ("schema_version", "uint32", False),
         ("timestamp_ns", "int64", False),
@@ -294,6 +317,7 @@ CameraFrame = CLASSES["CameraFrame"]
 TruthTrackLabel = CLASSES["TruthTrackLabel"]
 TrackIdentity = CLASSES["TrackIdentity"]
 StandScan = CLASSES["StandScan"]
+DeviceStatus = CLASSES["DeviceStatus"]
 
 
 def new(name: str, **fields: Any) -> Any:
