@@ -19,7 +19,7 @@ import numpy as np
 
 from edge import swim_walls as walls
 from edge.swim_bins import BIN_HZ, COLUMNS, BinSettings, BodyBinner
-from edge.swim_length import reckon_length
+from edge.swim_length import drift_learner, lane_reading, reckon_length
 from edge.swim_paper import LengthEstimate
 from protocol import messages
 from protocol.session import Agent, Mount, Route, Sensor
@@ -52,6 +52,7 @@ class SwimTracker:
         self.scanned = 0  # rows already examined for events
         self.push: int | None = None  # row of the current length's push-off onset
         self.reversal: int | None = None  # row of a heading reversal waiting for its push-off
+        self.drift = drift_learner(sensor.mount)  # the heading's drift rate, carried from length to length
         self.counters = TrackerCounters()
 
     def push_samples(self, time_ns: np.ndarray, accel_g: np.ndarray, gyro_dps: np.ndarray) -> list[LengthEstimate]:
@@ -124,7 +125,11 @@ class SwimTracker:
         if push is None or not push < touch <= stop:
             self.counters.failed += 1
             return []
-        estimates = [reckon_length(self.rows[:self.n], push, touch, zero_at, self.pool_length_m, self.route)
+        rows = self.rows[:self.n]
+        if self.drift is not None:
+            self.drift = self.drift.learn(lane_reading(rows, push, touch, stop, self.route))
+        drift_dps = self.drift.rate_dps if self.drift is not None else 0.0
+        estimates = [reckon_length(rows, push, touch, zero_at, self.pool_length_m, self.route, drift_dps=drift_dps)
                      for zero_at in (stop, *other_stops) if touch <= zero_at]
         estimate = min(estimates, key=_rescaling)
         if not np.isfinite(estimate.swum_distance_m):

@@ -24,10 +24,10 @@ import numpy as np
 from edge.mounting import seat_to_chair
 from edge.swim_bins import BinSettings, BodyBinner, T
 from edge.swim_edge import SwimTracker
-from edge.swim_length import reckon_length
+from edge.swim_length import drift_learner, lane_reading, reckon_length
 from edge.swim_paper import paper_length
 from protocol.errors import InputError
-from protocol.session import AgentKind, Route, route_end_heading_rad
+from protocol.session import AgentKind, Mount, Route, route_end_heading_rad
 from protocol.session_log import SessionData
 
 MATCH_S = 1.0
@@ -140,11 +140,15 @@ def evaluate_swim(data: SessionData, path: Path, progress: Callable[[str], None]
 def _true_walls(report: SwimReport, rows: np.ndarray, truth: list[Any], pool: float, route: Route,
                 common: dict[str, Any]) -> None:
     times = rows[:, T]
+    drift = drift_learner(Mount(common["mounting"]))
     for k, length in enumerate(truth, start=1):
         push, touch = (int(i) for i in np.searchsorted(times, [length.start_ns, length.timestamp_ns]))
         following = truth[k].start_ns if k < len(truth) else length.timestamp_ns + 2_000_000_000
         stop = min(int(np.searchsorted(times, following)), len(rows) - 1)
-        estimate = reckon_length(rows, push, min(touch, stop), stop, pool, route)
+        touch = min(touch, stop)
+        if drift is not None:
+            drift = drift.learn(lane_reading(rows, push, touch, stop, route))
+        estimate = reckon_length(rows, push, touch, stop, pool, route, drift_dps=drift.rate_dps if drift else 0.0)
         report.lengths.append(LengthScore("reckon, true walls", index=k, truth_m=length.swum_distance_m,
                                           estimate_m=estimate.swum_distance_m, **common))
 
