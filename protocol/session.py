@@ -206,6 +206,14 @@ def _number(data: dict[str, Any], key: str, where: str, default: float, low: flo
     return float(value)
 
 
+def _integer(data: dict[str, Any], key: str, where: str, default: int, low: int, high: int) -> int:
+    """A whole number within [low, high] (a floor); 1.5 is refused rather than truncated."""
+    value = _number(data, key, where, default, low, high)
+    if value != int(value):
+        raise ConfigError(f"{where}.{key}: {data[key]!r} is not a whole number")
+    return int(value)
+
+
 def _optional_number(data: dict[str, Any], key: str, where: str, low: float, high: float) -> float | None:
     """A number within [low, high], or None when the key is absent. (The Earth's field is 22-67 uT
     everywhere, so magnetic_field_ut's bounds catch a value given in gauss or nT.)"""
@@ -267,11 +275,22 @@ def _beacon(data: dict[str, Any], where: str) -> Beacon:
     )
 
 
+def _check_beacon_reaches_court(beacon: Beacon, venue: Venue, where: str) -> None:
+    """A beacon whose reception zone does not touch the court can never give a fix: almost always
+    a coordinate in the wrong unit or from the wrong corner."""
+    dx = max(-beacon.x_m, 0.0, beacon.x_m - venue.court_length_m)
+    dy = max(-beacon.y_m, 0.0, beacon.y_m - venue.court_width_m)
+    if math.hypot(dx, dy) > beacon.radius_m:
+        raise ConfigError(f"{where}: ({beacon.x_m:g}, {beacon.y_m:g}) m is {math.hypot(dx, dy):.2f} m outside the "
+                          f"{venue.court_length_m:g} x {venue.court_width_m:g} m court, beyond its radius_m "
+                          f"{beacon.radius_m:g} (x_m runs 0..court_length_m, y_m 0..court_width_m from a corner)")
+
+
 def _sensor(data: dict[str, Any], where: str) -> Sensor:
     _check_keys(data, Sensor, where)
     sensor = Sensor(
         id=check_id(_required(data, "id", where), f"{where}.id"),
-        mount=_enum(data, "mount", where, Mount, data.get("mount")),
+        mount=_enum(data, "mount", where, Mount, _required(data, "mount", where)),
         rate_hz=_number(data, "rate_hz", where, 200.0, 1.0, 10_000.0),
         spin_axis=_axis(data, "spin_axis", where),
         forward_axis=_axis(data, "forward_axis", where),
@@ -321,7 +340,7 @@ def _stand(data: dict[str, Any], where: str) -> Stand:
         id=check_id(_required(data, "id", where), f"{where}.id"),
         x_m=_number(data, "x_m", where, _required(data, "x_m", where), -1e4, 1e4),
         y_m=_number(data, "y_m", where, _required(data, "y_m", where), -1e4, 1e4),
-        floor=int(_number(data, "floor", where, 0, -20, 200)),
+        floor=_integer(data, "floor", where, 0, -20, 200),
         heading_deg=_number(data, "heading_deg", where, 0.0, -360.0, 360.0),
         tilt_deg=_number(data, "tilt_deg", where, 0.0, -90.0, 90.0),
     )
@@ -339,7 +358,7 @@ def _map_point(data: dict[str, Any], where: str) -> MapPoint:
         x_m=_number(data, "x_m", where, _required(data, "x_m", where), -1e4, 1e4),
         y_m=_number(data, "y_m", where, _required(data, "y_m", where), -1e4, 1e4),
         directions_deg=angles,
-        floor=int(_number(data, "floor", where, 0, -20, 200)),
+        floor=_integer(data, "floor", where, 0, -20, 200),
     )
 
 
@@ -391,10 +410,14 @@ def floor_plan_from(value: Any, where: str, base: Path | None = None) -> tuple[A
 def session_from_dict(data: dict[str, Any], where: str = "session", base: Path | None = None) -> Session:
     """Validate a plain dict (from TOML or JSON) into a Session; ConfigError names the key path.
     `base` is the folder that relative file names in it (the floor plan) are read from."""
-    allowed = {"venue", "agents", "source", "format_version"}
+    allowed = {f.name for f in dataclasses.fields(Session)} | {"format_version"}
     for key in data:
         if key not in allowed:
             raise ConfigError(f"{where}: unknown key {key!r} (allowed: {', '.join(sorted(allowed))})")
+    version = data.get("format_version", FORMAT_VERSION)
+    if isinstance(version, bool) or not isinstance(version, int) or not 1 <= version <= FORMAT_VERSION:
+        raise ConfigError(f"{where}.format_version: {version!r} is not a format this reckon reads "
+                          f"(1 to {FORMAT_VERSION}; a newer file needs a newer reckon)")
     venue_data = _required(data, "venue", where)
     if not isinstance(venue_data, dict):
         raise ConfigError(f"{where}.venue: expected a table")
@@ -415,6 +438,8 @@ def session_from_dict(data: dict[str, Any], where: str = "session", base: Path |
         magnetic_field_ut=_optional_number(venue_data, "magnetic_field_ut", vwhere, 20.0, 70.0),
         magnetic_dip_deg=_optional_number(venue_data, "magnetic_dip_deg", vwhere, -90.0, 90.0),
     )
+    for i, beacon in enumerate(beacons):
+        _check_beacon_reaches_court(beacon, venue, f"{vwhere}.beacons[{i}]")
     agents = tuple(_agent(a, f"{where}: agents[{i}]") for i, a in enumerate(_list(data, "agents", where)))
     if not agents:
         raise ConfigError(f"{where}: no agents (add at least one [[agents]] table)")

@@ -42,6 +42,11 @@ class SessionWriter:
         stamp = int(message.timestamp_ns if log_time_ns is None else log_time_ns)
         self._writer.write_message(topic, message, log_time=stamp, publish_time=int(message.timestamp_ns))
 
+    def flush(self) -> None:
+        """End the chunk in progress and hand every message so far to the OS, so a reader sees them
+        even if this process is killed before `close` (the hub's checkpoints, hub/hub_state.py)."""
+        self._writer._writer.flush()  # mcap_protobuf's Writer keeps the mcap Writer, whose flush() this is
+
     def close(self) -> None:
         if not self._file.closed:
             self._writer.finish()

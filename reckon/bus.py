@@ -29,8 +29,10 @@ import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+import json5
 import zenoh
 
 from protocol import bus as wire
@@ -66,15 +68,7 @@ def zenoh_config(mode: str = "peer", listen: Sequence[str] = (), connect: Sequen
     ConfigError when the mode is unknown, an endpoint is malformed, or there is no endpoint at
     all (with scouting off such a session could never meet anyone).
     """
-    if mode not in MODES:
-        raise ConfigError(f"zenoh mode {mode!r} is not one of {', '.join(MODES)}")
-    for where, endpoints in (("listen", listen), ("connect", connect)):
-        if isinstance(endpoints, str):
-            raise ConfigError(f"zenoh {where}: expected a list of endpoints, got the string {endpoints!r}")
-        for endpoint in endpoints:
-            if not _ENDPOINT.match(endpoint):
-                raise ConfigError(f"zenoh {where} endpoint {endpoint!r} is not <protocol>/<address>, "
-                                  f"e.g. {DEFAULT_ENDPOINT}")
+    _check_mode_and_endpoints(mode, listen, connect)
     if not listen and not connect:
         raise ConfigError("zenoh config: no listen and no connect endpoint (scouting is off, so "
                           f"give at least one, e.g. listen {DEFAULT_ENDPOINT})")
@@ -87,6 +81,81 @@ def zenoh_config(mode: str = "peer", listen: Sequence[str] = (), connect: Sequen
         "timestamping": {"enabled": bool(timestamping)},
     }
     return zenoh.Config.from_json5(json.dumps(document))
+
+
+def _check_mode_and_endpoints(mode: str, listen: Sequence[str], connect: Sequence[str]) -> None:
+    if mode not in MODES:
+        raise ConfigError(f"zenoh mode {mode!r} is not one of {', '.join(MODES)}")
+    for where, endpoints in (("listen", listen), ("connect", connect)):
+        if isinstance(endpoints, str):
+            raise ConfigError(f"zenoh {where}: expected a list of endpoints, got the string {endpoints!r}")
+        for endpoint in endpoints:
+            if not _ENDPOINT.match(endpoint):
+                raise ConfigError(f"zenoh {where} endpoint {endpoint!r} is not <protocol>/<address>, "
+                                  f"e.g. {DEFAULT_ENDPOINT}")
+
+
+# What a config file gets from us unless it sets the key itself: the same as `zenoh_config`.
+FILE_DEFAULTS = {"scouting/multicast/enabled": False, "scouting/gossip/enabled": False, "timestamping/enabled": True}
+# Keys of a config file that name files Zenoh opens only when the session starts: checked at once.
+FILE_PATH_KEYS = ("transport/link/tls/root_ca_certificate", "transport/link/tls/listen_private_key",
+                  "transport/link/tls/listen_certificate", "transport/link/tls/connect_private_key",
+                  "transport/link/tls/connect_certificate", "transport/auth/usrpwd/dictionary_file")
+
+
+def zenoh_config_from_file(path: str | Path, mode: str | None = None, listen: Sequence[str] = (),
+                           connect: Sequence[str] = ()) -> zenoh.Config:
+    """A Zenoh config from a JSON5 file (a venue's router, hub or edge config, e.g. deploy/zenoh/).
+
+    Loaded with `zenoh.Config.from_file`, so every key is Zenoh's own (schema of eclipse-zenoh 1.10).
+    Where the file is silent, scouting stays off and timestamping on, as in `zenoh_config`; what
+    the file sets wins. `mode`, `listen` and `connect` (from the command line) replace the file's
+    values when given. ConfigError naming the file and the problem when it cannot be read, is not
+    JSON5, has a key or value Zenoh refuses, names a certificate or password file that does not
+    exist, or an override is malformed.
+    """
+    path = Path(path)
+    if path.suffix not in (".json5", ".json"):
+        raise ConfigError(f"zenoh config {path}: expected a .json5 or .json file")
+    try:
+        document = json5.loads(path.read_text(encoding="utf-8"))
+    except OSError as error:
+        raise ConfigError(f"zenoh config {path}: cannot read it ({error.strerror})") from None
+    except ValueError as error:
+        raise ConfigError(f"zenoh config {path}: not valid JSON5: {error}") from None
+    if not isinstance(document, dict):
+        raise ConfigError(f"zenoh config {path}: expected an object {{...}} at the top, got {type(document).__name__}")
+    try:
+        config = zenoh.Config.from_file(str(path))
+    except zenoh.ZError as error:
+        raise ConfigError(f"zenoh config {path}: {_without_source_location(error)}") from None
+    for key, value in FILE_DEFAULTS.items():
+        if _lookup(document, key) is None:
+            config.insert_json5(key, json.dumps(value))
+    _check_mode_and_endpoints(mode or "peer", listen, connect)
+    for key, value in (("mode", mode), ("listen/endpoints", list(listen)), ("connect/endpoints", list(connect))):
+        if value:
+            config.insert_json5(key, json.dumps(value))
+    for key in FILE_PATH_KEYS:
+        named = _lookup(document, key)
+        if named is not None and not Path(named).is_file():
+            raise ConfigError(f"zenoh config {path}: {key} names {named!r}, which is not a file")
+    return config
+
+
+def _lookup(document: dict[str, Any], key: str) -> Any:
+    """The value at a `a/b/c` key path of a parsed config file, or None where it is not set."""
+    value: Any = document
+    for part in key.split("/"):
+        if not isinstance(value, dict):
+            return None
+        value = value.get(part)
+    return value
+
+
+def _without_source_location(error: zenoh.ZError) -> str:
+    """Zenoh's message without the ` at /root/.cargo/...rs:123.` of the Rust code that raised it."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?$", "", str(error).strip())
 
 
 @contextmanager

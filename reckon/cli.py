@@ -216,13 +216,15 @@ def run_calibrate(args: argparse.Namespace, progress: Callable[[str], None]) -> 
 
 
 def _bus_config(args: argparse.Namespace, default_role: str):
-    """Zenoh config from --listen/--connect; by default the embedded loopback endpoint."""
-    from reckon.bus import DEFAULT_ENDPOINT, zenoh_config
+    """Zenoh config from --zenoh-config and --listen/--connect/--mode; by default the embedded loopback endpoint."""
+    from reckon.bus import DEFAULT_ENDPOINT, zenoh_config, zenoh_config_from_file
 
     listen, connect = list(args.listen), list(args.connect)
+    if args.zenoh_config:  # the file's endpoints unless the command line gives its own
+        return zenoh_config_from_file(args.zenoh_config, mode=args.mode, listen=listen, connect=connect)
     if not listen and not connect:
         (listen if default_role == "listen" else connect).append(DEFAULT_ENDPOINT)
-    return zenoh_config(mode=args.mode, listen=listen, connect=connect)
+    return zenoh_config(mode=args.mode or "peer", listen=listen, connect=connect)
 
 
 def _stop_on_signals():
@@ -268,9 +270,16 @@ def run_edge_command(args: argparse.Namespace, progress: Callable[[str], None]) 
         print(source.addresses(), file=sys.stderr, flush=True)
     summary = run_edge(_bus_config(args, "connect"), session, args.agent, source, stop, pose_rate_hz=args.pose_rate,
                        wait_for=args.wait_for, wait_timeout_s=args.wait_timeout,
-                       progress=lambda state: progress(str(state)))
+                       progress=lambda state: progress(str(state)), spool=Path(args.spool) if args.spool else None,
+                       spool_limit_bytes=_spool_limit_bytes(args.spool_limit_mb))
     print(summary)
     return 0
+
+
+def _spool_limit_bytes(megabytes: float) -> int:
+    if not megabytes > 0:
+        raise ReckonError(f"--spool-limit-mb {megabytes:g}: must be more than 0 (MiB)")
+    return int(megabytes * 1024 * 1024)
 
 
 def run_hub_command(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
@@ -292,9 +301,35 @@ def run_hub_command(args: argparse.Namespace, progress: Callable[[str], None]) -
             latest[output.agent_id] = f"{output.agent_id} x {output.x_m:.1f} m y {output.y_m:.1f} m"
             progress("; ".join(latest[agent_id] for agent_id in sorted(latest)))
 
-    summary = run_hub(_bus_config(args, "listen"), session, _stop_on_signals(), settings,
-                      Path(args.output) if args.output else None, on_output=show if walkers else None)
+    view = None
+    if args.view:  # before the hub starts: a taken port fails at once
+        from reckon.court_view import CourtView, parse_view_address
+
+        view = CourtView(session, *parse_view_address(args.view))
+        print(f"court view: open {view.url} in a browser", file=sys.stderr, flush=True)
+
+    def on_output(output: Any) -> None:
+        if walkers:
+            show(output)
+        if view is not None:
+            view.on_output(output)
+
+    try:
+        summary = run_hub(_bus_config(args, "listen"), session, _stop_on_signals(), settings,
+                          Path(args.output) if args.output else None, on_output=on_output if walkers or view else None,
+                          on_input=view.on_input if view else None, on_bus=view.attach if view else None,
+                          state=Path(args.state) if args.state else None)
+    finally:
+        if view is not None:
+            view.close()
     print(summary)
+    return 0
+
+
+def run_export(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from reckon.foxglove_export import export_foxglove
+
+    print(export_foxglove(Path(args.input), Path(args.output), progress=progress))
     return 0
 
 
@@ -324,12 +359,37 @@ def run_demo(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
 
 
 def run_bench_command(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    if args.suite == "load":
+        from reckon.bench_load import format_load, run_load
+
+        result = run_load(Path(args.out) / "load", agents=args.agents, rate_hz=args.rate, duration_s=args.duration,
+                          seed=args.seed, progress=progress)
+        print(json.dumps(result, indent=1) if args.json else format_load(result))
+        return 0
+    if args.suite == "soak":
+        from reckon.bench_soak import PLAYERS, format_soak, run_soak
+
+        result = run_soak(Path(args.out) / "soak", hours=args.hours, players=args.players or PLAYERS, seed=args.seed,
+                          progress=progress)
+        print(json.dumps(result, indent=1) if args.json else format_soak(result))
+        return 0
     from reckon.bench import format_table, run_bench
 
-    result = run_bench(Path(args.out), players=args.players, duration_s=args.duration, seed=args.seed,
+    result = run_bench(Path(args.out), players=args.players or 10, duration_s=args.duration, seed=args.seed,
                        progress=progress, latency_players=args.latency_players)
     print(json.dumps(result, indent=1) if args.json else format_table(result))
     return 0
+
+
+def run_fuzz_command(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from reckon.fuzz import run_atheris, run_fuzz
+
+    if args.engine == "atheris":
+        return run_atheris(args.decoder, args.frames)
+    results = run_fuzz(args.decoder, args.frames, args.seed)
+    for result in results:
+        print(result)
+    return 1 if any(r.crashes for r in results) else 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -430,7 +490,10 @@ def build_parser() -> argparse.ArgumentParser:
     def bus_options(command: argparse.ArgumentParser) -> None:
         command.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7447")
         command.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
-        command.add_argument("--mode", default="peer", choices=["peer", "client", "router"])
+        command.add_argument("--mode", choices=["peer", "client", "router"], help="default: peer, or the --zenoh-config file's")
+        command.add_argument("--zenoh-config", metavar="FILE.json5",
+                             help="a Zenoh config file (router, TLS, credentials: deploy/zenoh/); "
+                                  "--listen/--connect/--mode override it")
 
     rep = sub.add_parser("replay", help="publish a session log over Zenoh as if its devices were live")
     rep.add_argument("session")
@@ -460,6 +523,10 @@ def build_parser() -> argparse.ArgumentParser:
     edge.add_argument("--pose-rate", type=float, default=50.0, metavar="HZ", help="pose messages per second (default 50)")
     edge.add_argument("--wait-for", type=int, default=0, metavar="N", help="wait for N hubs/recorders first")
     edge.add_argument("--wait-timeout", type=float, default=60.0, metavar="S")
+    edge.add_argument("--spool", metavar="DIR", help="keep messages here while no hub is up, replay them in order "
+                      "when one is (docs/faults.md; default: no spool)")
+    edge.add_argument("--spool-limit-mb", type=float, default=512.0, metavar="N",
+                      help="the spool's size limit in MiB; past it new messages are refused and counted (default 512)")
     bus_options(edge)
     edge.set_defaults(run=run_edge_command)
 
@@ -468,10 +535,26 @@ def build_parser() -> argparse.ArgumentParser:
     hub.add_argument("-o", "--output", metavar="FILE.mcap", help="record every input and output here")
     hub.add_argument("--lag", type=float, default=30.0, metavar="S", help="refined track lag (default 30 s)")
     hub.add_argument("--pose-rate", type=float, default=50.0, metavar="HZ", help="the edges' pose rate (default 50)")
+    hub.add_argument("--state", metavar="FILE", help="checkpoint the hub here every 2 s and restore from it on start "
+                     "(needs -o; the restarted hub records to hub.1.mcap, ...; docs/faults.md)")
     hub.add_argument("--corrections", default="beacon,collision,fix",
                      help="comma-separated: beacon, collision, fix (default all; empty for none)")
+    hub.add_argument("--view", metavar="HOST:PORT",
+                     help="serve the live court view here, e.g. 127.0.0.1:8080 (docs/court-view.md; default off)")
     bus_options(hub)
     hub.set_defaults(run=run_hub_command)
+
+    export = sub.add_parser("export", help="convert a session log for another tool")
+    export_kind = export.add_subparsers(dest="format", required=True)
+    fox = export_kind.add_parser("foxglove", help="add Foxglove 3D scene channels (court, beacons, agents) to a copy "
+                                 "of a session log (docs/court-view.md)")
+    fox.add_argument("input", metavar="IN.mcap")
+    fox.add_argument("-o", "--output", required=True, metavar="OUT.mcap")
+    fox.set_defaults(run=run_export)
+
+    from reckon import doctor
+
+    doctor.register(sub, bus_options, _bus_config)
 
     cal = sub.add_parser("calibrate", help="the simulator against the paper's dead-reckoning curve, over seeds")
     cal.add_argument("--seeds", type=_seeds, default=[1, 2, 3, 4, 5], help="e.g. 1-5 (default) or 1,3")
@@ -492,13 +575,27 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--lag", type=float, default=30.0, metavar="S", help="the hub's refined-track lag (default 30 s)")
     demo.set_defaults(run=run_demo)
     bench = sub.add_parser("bench", help="measure the edge estimator, the live pipeline, latency and memory here")
-    bench.add_argument("--players", type=int, default=10)
-    bench.add_argument("--duration", type=float, default=60.0, help="game seconds of the unpaced run (default 60)")
+    bench.add_argument("suite", nargs="?", choices=("pipeline", "load", "soak"), default="pipeline",
+                       help="pipeline (default): edge, pipeline, latency, memory; load: one hub with --agents chairs "
+                       "at --rate Hz; soak: --hours of a game through edges and a hub, RSS sampled")
+    bench.add_argument("--players", type=int, help="chairs (default 10; soak 2)")
+    bench.add_argument("--duration", type=float, default=60.0,
+                       help="game seconds of the unpaced run; load: seconds of load (default 60)")
+    bench.add_argument("--agents", type=int, default=500, help="load: simulated chairs (default 500)")
+    bench.add_argument("--rate", type=float, default=50.0, metavar="HZ", help="load: poses per chair a second (default 50)")
+    bench.add_argument("--hours", type=float, default=1.0, help="soak: hours of game replayed (default 1)")
     bench.add_argument("--seed", type=int, default=1)
     bench.add_argument("--latency-players", type=int, metavar="N", help="chairs in the paced latency run (default: --players)")
     bench.add_argument("--out", default="out/bench", help="folder for the games, the hub's recordings and the process logs")
     bench.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     bench.set_defaults(run=run_bench_command)
+    fuzz = sub.add_parser("fuzz", help="the device decoders against mutated frames: crashes and frames recovered")
+    fuzz.add_argument("--frames", type=int, default=1_000_000, help="frames per decoder, intact and mutated")
+    fuzz.add_argument("--decoder", choices=("tsnd", "ximu3", "ble", "all"), default="all")
+    fuzz.add_argument("--seed", type=int, default=1)
+    fuzz.add_argument("--engine", choices=("random", "atheris"), default="random",
+                      help="atheris: libFuzzer's coverage-guided inputs (needs the optional atheris package)")
+    fuzz.set_defaults(run=run_fuzz_command)
     return parser
 
 

@@ -37,9 +37,12 @@ from protocol.errors import ConfigError
 from protocol.session import AgentKind, Session, load_toml
 from protocol.session_log import LogMessages, read_description
 from reckon.bus import Alive, Publisher, Subscription, flush, open_session, wait_for_peers
+from reckon.spool import DEFAULT_LIMIT_BYTES, SpooledPublisher, edge_publisher
 
 log = logging.getLogger(__name__)
 FLUSH_TIMEOUT_S = 10.0
+STATUS_PERIOD_S = 1.0  # DeviceStatus per sensor about this often (and at once when its flags change)
+STATUS_WARN_EVERY_S = 10.0  # a sensor's new faults are logged at most this often
 
 
 @dataclass
@@ -56,6 +59,8 @@ class EdgeSummary:
     swimmer: bool = False
     lengths: int = 0  # swimmers: SwimLength messages out
     pedestrian: bool = False  # a phone: `poses` are its steps
+    spooled: int = 0  # messages left in the spool at the end (replayed on the next start)
+    spool_refused: int = 0  # messages lost because the spool was full
 
     def __str__(self) -> str:
         if self.swimmer:
@@ -104,9 +109,11 @@ def mcap_source(path: Path, agent_ids: str | set[str] | None, speed: float, stop
 
 def run_edge(config: zenoh.Config, session: Session, agent_id: str, source: Iterable[Any], stop: threading.Event,
              pose_rate_hz: float = 50.0, wait_for: int = 0, wait_timeout_s: float = 60.0,
-             progress: Callable[[EdgeSummary], None] | None = None) -> EdgeSummary:
+             progress: Callable[[EdgeSummary], None] | None = None, spool: Path | None = None,
+             spool_limit_bytes: int = DEFAULT_LIMIT_BYTES, spool_wait_s: float = 5.0) -> EdgeSummary:
     """Run one agent's edge (a chair, a swimmer or a pedestrian's phone) until the source ends or
-    `stop` is set."""
+    `stop` is set. `spool`: a folder where messages wait while no hub is up (reckon/spool.py), and
+    at the end up to `spool_wait_s` for a hub to replay them to (else they stay for the next start)."""
     agent = session.agent(agent_id)
     edge: ChairEdge | SwimEdge | PedestrianEdge
     if agent.kind is AgentKind.SWIMMER:
@@ -117,9 +124,10 @@ def run_edge(config: zenoh.Config, session: Session, agent_id: str, source: Iter
         edge = ChairEdge(agent, pose_rate_hz)
     venue = session.venue.name
     summary = EdgeSummary(agent_id, swimmer=isinstance(edge, SwimEdge), pedestrian=isinstance(edge, PedestrianEdge))
-    with open_session(config) as bus, Publisher(bus) as publisher, \
+    with open_session(config) as bus, edge_publisher(bus, session.venue.name, spool, spool_limit_bytes) as publisher, \
             Subscription(bus, keys.correction(venue, agent_id), capacity=256) as corrections, \
-            Alive(bus, venue, wire.Role.EDGE, agent_id):
+            Alive(bus, venue, wire.Role.EDGE, agent_id), \
+            StatusReporter(bus, venue, agent, source, publisher) as status:
         if wait_for:
             wait_for_peers(bus, [wire.alive_selector(venue, wire.Role.HUB), wire.alive_selector(venue, wire.Role.RECORDER)],
                            wait_for, wait_timeout_s)
@@ -142,8 +150,10 @@ def run_edge(config: zenoh.Config, session: Session, agent_id: str, source: Iter
             if isinstance(edge, ChairEdge):
                 _take_corrections(corrections, edge)
             if message.DESCRIPTOR.name == "ImuBatch":
-                publisher.publish(keys.imu(venue, agent_id, message.sensor_id), message)  # raw first: nothing lost
-                publish(edge.push(message))
+                # duplicates out, late batches re-ordered, clock jumps re-anchored (edge/device_health.py)
+                for batch in status.push(message):
+                    publisher.publish(keys.imu(venue, agent_id, batch.sensor_id), batch)  # before the estimator
+                    publish(edge.push(batch))
             elif message.DESCRIPTOR.name == "StandScan":
                 publisher.publish(keys.scan(venue, agent_id), message)  # refused ones too, with their reason
                 if isinstance(edge, PedestrianEdge):
@@ -152,9 +162,88 @@ def run_edge(config: zenoh.Config, session: Session, agent_id: str, source: Iter
                 publisher.publish(keys.beacon(venue, agent_id, message.sensor_id), message)
             if progress and summary.messages_in % 1000 == 0:
                 progress(_summarise(summary, edge))
+        for batch in status.flush():
+            publisher.publish(keys.imu(venue, agent_id, batch.sensor_id), batch)
+            publish(edge.push(batch))
         publish(edge.flush())
+        status.report()  # the last word on every sensor, before the flush below
+        if isinstance(publisher, SpooledPublisher):
+            publisher.finish(spool_wait_s)
+            summary.spooled, summary.spool_refused = publisher.spooled, publisher.refused
         flush(bus, wire.alive_selector(venue), FLUSH_TIMEOUT_S)  # closing drops what is still queued
     return _summarise(summary, edge)
+
+
+class StatusReporter:
+    """The agent's sensors' health (edge/device_health.py) as DeviceStatus on `keys.status`: every
+    STATUS_PERIOD_S from a thread of its own, so a silent device is reported too, and at once when
+    a sensor's flags change. A source may tell more: `device_ranges` (sensor id -> full scales, for
+    saturation) and `link(sensor_id) -> (connected, reconnects, battery_pct)`; `spooled` is the
+    publisher's, when it spools. A status is a view of now: it goes straight to the bus, unspooled."""
+
+    def __init__(self, bus: zenoh.Session, venue: str, agent: Any, source: Any, publisher: Any):
+        from edge.device_health import DeviceHealth
+
+        self.venue, self.agent_id = venue, agent.id
+        self.health = DeviceHealth(agent.id, ranges=getattr(source, "device_ranges", None))
+        self._link: Callable[[str], tuple[bool, int, float]] | None = getattr(source, "link", None)
+        self._main_publisher = publisher
+        self._publisher = Publisher(bus)
+        self._lock = threading.Lock()
+        self._sent: dict[str, list[str]] = {}
+        self._warned: dict[str, int] = {}  # sensor -> edge time of its last warning
+        self._stop = threading.Event()
+        now = time.time_ns()
+        for sensor in agent.sensors:
+            self.health.expect(sensor.id, now)
+        self._thread = threading.Thread(target=self._run, name=f"status {agent.id}", daemon=True)
+        self._thread.start()
+
+    def push(self, batch: Any) -> list[Any]:
+        with self._lock:
+            ready = self.health.push(batch, time.time_ns())
+            self._report(batch.sensor_id, time.time_ns(), only_on_change=True)
+        return ready
+
+    def flush(self) -> list[Any]:
+        with self._lock:
+            return self.health.flush()
+
+    def _run(self) -> None:
+        while not self._stop.wait(STATUS_PERIOD_S):
+            self.report()
+
+    def report(self) -> None:
+        """A DeviceStatus for every sensor now."""
+        with self._lock:
+            now = time.time_ns()
+            for sensor_id in list(self.health.sensors):
+                self._report(sensor_id, now, only_on_change=False)
+
+    def _report(self, sensor_id: str, now_ns: int, only_on_change: bool) -> None:
+        connected, reconnects, battery_pct = self._link(sensor_id) if self._link else (True, 0, -1.0)
+        spooled = int(getattr(self._main_publisher, "spooled", 0) or 0)
+        flags = self.health.flags(sensor_id, now_ns, connected) + (["spooling"] if spooled else [])
+        if only_on_change and flags == self._sent.get(sensor_id):
+            return
+        new = [flag for flag in flags if flag not in self._sent.get(sensor_id, [])]
+        self._sent[sensor_id] = flags
+        status = self.health.status(sensor_id, now_ns, connected=connected, reconnects=reconnects,
+                                    battery_pct=battery_pct, spooled=spooled)
+        self._publisher.publish(keys.status(self.venue, self.agent_id, sensor_id), status)
+        if new and now_ns - self._warned.get(sensor_id, 0) >= STATUS_WARN_EVERY_S * 1e9:
+            self._warned[sensor_id] = now_ns
+            log.warning("%s: %s (so far: %d gaps, %d duplicates, %d out of order, %d clock jumps, %d saturated "
+                        "samples, %d reconnects)", sensor_id, ", ".join(flags), status.gaps, status.duplicates,
+                        status.out_of_order, status.clock_jumps, status.saturated, status.reconnects)
+
+    def __enter__(self) -> "StatusReporter":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        self._publisher.close()
 
 
 def _take_corrections(subscription: Subscription, edge: ChairEdge) -> None:
@@ -199,18 +288,23 @@ class SerialSources:
     Each URL's `protocol` picks the decoder and the commands (SerialSource.from_url: an x-IMU3
     streams on its own, a TSND is set up and started on open, stopped on close).
     Ports are opened here, at once, so a device that is missing fails before anything starts.
-    A device that goes away (link lost, unplugged) keeps its last frames; its reader then tries
-    to open the port again every `RETRY_S` and carries on when the device is back, for up to
-    `reconnect_s`; after that its stream ends. Iterating yields ImuBatch messages, each stamped
-    with the host clock at its arrival, until every stream has ended or `stop` is set.
+    A device that goes away (link lost, unplugged, a read error) keeps its last frames; its reader
+    then tries to open the port again, first after `RETRY_S`, the wait doubling up to `MAX_RETRY_S`,
+    and carries on when the device is back (a by-id path that points at the new port finds it),
+    for up to `reconnect_s`; after that its stream ends. `link(sensor)` says whether a sensor is
+    connected and how often it came back; `device_ranges` its full scales (for saturation).
+    Iterating yields ImuBatch messages, each stamped with the host clock at its arrival, until
+    every stream has ended or `stop` is set.
     """
 
     _DONE = object()
-    RETRY_S = 0.5
+    RETRY_S = 0.1
+    MAX_RETRY_S = 2.0
 
     def __init__(self, specs: list[tuple[str, str]], agent_id: str, stop: threading.Event, reconnect_s: float = 30.0):
         from edge.decoders import ImuBatcher
-        from edge.sources.serial_source import SerialSource
+        from edge.device_health import DEVICE_RANGES
+        from edge.sources.serial_source import SerialSource, parse_serial_protocol
 
         self.stop = stop
         self.reconnect_s = reconnect_s
@@ -218,6 +312,9 @@ class SerialSources:
         self.queue: queue.Queue[Any] = queue.Queue(maxsize=1000)  # blocks the readers, never drops
         self.sources = [(url, SerialSource.from_url(url).open(), ImuBatcher(agent_id, sensor_id))
                         for sensor_id, url in specs]
+        self.connected = {sensor_id: True for sensor_id, _ in specs}
+        self.reconnects_by_sensor = {sensor_id: 0 for sensor_id, _ in specs}
+        self.device_ranges = {sensor_id: DEVICE_RANGES[parse_serial_protocol(url)[0]] for sensor_id, url in specs}
         self.threads = [threading.Thread(target=self._read, args=triple, daemon=True) for triple in self.sources]
         for thread in self.threads:
             thread.start()
@@ -238,12 +335,15 @@ class SerialSources:
                     while not self.stop.is_set():
                         self._put(batcher.feed(source.read_frames()))
                 except DeviceDisconnected as gone:
+                    self.connected[batcher.sensor_id] = False
                     self._put(batcher.feed(gone.frames))
                     source.close()
                     log.warning("%s; trying to reopen it for %.0f s", gone, self.reconnect_s)
                     source = None
                     deadline = time.monotonic() + self.reconnect_s
-                    while source is None and time.monotonic() < deadline and not self.stop.wait(self.RETRY_S):
+                    delay = self.RETRY_S
+                    while source is None and time.monotonic() < deadline and not self.stop.wait(delay):
+                        delay = min(2 * delay, self.MAX_RETRY_S)
                         try:
                             source = SerialSource.from_url(url, decoder=decoder).open()
                         except DeviceUnavailable:
@@ -251,14 +351,21 @@ class SerialSources:
                     if source is None:
                         return
                     self.reconnects += 1
+                    self.reconnects_by_sensor[batcher.sensor_id] += 1
+                    self.connected[batcher.sensor_id] = True
                     log.warning("%s is back (reconnect %d)", url, self.reconnects)
         except Exception as error:  # handed to the consumer, raised there
             self.queue.put(error)
         finally:
+            self.connected[batcher.sensor_id] = False
             self._put(batcher.flush())
             if source is not None:
                 source.close()
             self.queue.put(self._DONE)
+
+    def link(self, sensor_id: str) -> tuple[bool, int, float]:
+        """(connected, reconnects, battery_pct): neither an x-IMU3 nor a TSND stream says its battery."""
+        return self.connected.get(sensor_id, False), self.reconnects_by_sensor.get(sensor_id, 0), -1.0
 
     def __iter__(self) -> Iterator[Any]:
         running = len(self.threads)

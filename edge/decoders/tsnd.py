@@ -23,7 +23,7 @@ What becomes of the bytes:
 - anything else -> `Rejected(raw, reason, offset, detail)` in stream order, reasons in RejectReason.
 
 Time: `timestamp_us` = (days * 86 400 000 + tick) ms in us, where `days` counts the midnight wraps seen
-(a tick more than half a day below the previous one), so timestamps keep increasing across
+(a tick in the last 10 minutes of the day, then one in the first 10), so timestamps keep increasing across
 midnight; the origin is 00:00 of the day of the first frame. The day count survives `reset()`
 (a reopened port does not move the clock back). A smaller step back is left alone: the
 batcher counts it as a clock jump.
@@ -62,7 +62,7 @@ ACC_LIMIT_COUNTS = 168_000  # +-16 g in 0.1 mg, plus 5 %
 GYRO_LIMIT_COUNTS = 210_000  # +-2000 deg/s in 0.01 deg/s, plus 5 %
 MAG_LIMIT_COUNTS = 50_000  # +-5000 uT in 0.1 uT: above any magnetometer's full scale we know of
 DAY_MS = 86_400_000
-HALF_DAY_MS = DAY_MS // 2
+WRAP_WINDOW_MS = 600_000  # 10 min either side of midnight: see TickClock
 MAX_RUN_BYTES = 4096
 
 # Parameter bytes of what the device sends (responses 0x8F..0xDD, events 0x80..0x8C):
@@ -142,14 +142,21 @@ def int24(data: bytes, at: int) -> int:
 
 
 class TickClock:
-    """TSND tick (ms since midnight, wraps daily) -> ms since midnight of the first day seen."""
+    """TSND tick (ms since midnight, wraps daily) -> ms since midnight of the first day seen.
+
+    A wrap is a tick in the last WRAP_WINDOW_MS before midnight followed by one in the first
+    WRAP_WINDOW_MS after it. Fuzzing found why the window is needed: a damaged frame that passes
+    the 8-bit BCC carries a random tick, and "any tick half a day below the last" then added a day
+    to every later timestamp. A device silent across midnight for longer than the window comes
+    back a day early: a clock jump, which edge/device_health.py re-anchors."""
 
     def __init__(self) -> None:
         self.days = 0
         self._last: int | None = None
 
     def ms(self, tick_ms: int) -> int:
-        if self._last is not None and tick_ms < self._last - HALF_DAY_MS:
+        last = self._last
+        if last is not None and last >= DAY_MS - WRAP_WINDOW_MS and tick_ms < WRAP_WINDOW_MS:
             self.days += 1
         self._last = tick_ms
         return self.days * DAY_MS + tick_ms

@@ -64,6 +64,13 @@ DEFAULT_SALVAGE_WINDOW_US = 1_000_000
 # certificate states another field.
 MAG_UT_PER_AU = 50.0
 UINT64_MAX = 2**64 - 1
+# Plausibility bounds, 5 x the x-IMU3's ranges (+-2000 deg/s, +-16 g; the magnetometer reads a few
+# a.u.). Binary messages carry no checksum: fuzzing found a message cut short whose bytes plus the
+# next message's make exactly one message's length, with absurd floats (1e13 deg/s) where the
+# next message's bytes landed. A value beyond these bounds rejects the line, which is then salvaged.
+MAX_GYRO_DPS = 10_000.0
+MAX_ACCEL_G = 80.0
+MAX_MAG_AU = 100.0
 
 _NUMBER = rb"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _ASCII_INERTIAL = re.compile(rb"I,(\d{1,20})" + (rb",(" + _NUMBER + rb")") * 6 + rb"\r?\n")
@@ -79,6 +86,7 @@ class RejectReason(str, enum.Enum):
     BAD_ASCII = "bad_ascii"  # `I,`/`M,` line that is not a timestamp and the right count of numbers
     BAD_JSON = "bad_json"  # line starting with `{` that is not a JSON object
     NOT_FINITE = "not_finite"  # NaN or infinity in a measurement
+    OUT_OF_RANGE = "out_of_range"  # a value beyond MAX_GYRO_DPS / MAX_ACCEL_G / MAX_MAG_AU
     NOT_A_MESSAGE = "not_a_message"  # first byte is no message id (lower case, digit, control byte)
     OVERLONG = "overlong"  # max_message_bytes reached without LF
     GARBAGE = "garbage"  # bytes before a message found at the end of a damaged line
@@ -155,6 +163,19 @@ def _unstuff(body: bytes) -> bytes | None:
     return body.replace(ESCAPED_LF, b"\n").replace(ESCAPED_ESCAPE, ESCAPE)
 
 
+def _beyond_range(inertial: bool, values: tuple[float, ...] | list[float]) -> str:
+    """'' when every value is plausible, else what is not (the value and the bound)."""
+    if inertial:
+        gyro, accel = max(abs(v) for v in values[0:3]), max(abs(v) for v in values[3:6])
+        if gyro > MAX_GYRO_DPS:
+            return f"|gyro| {gyro:.6g} deg/s exceeds {MAX_GYRO_DPS:g}"
+        if accel > MAX_ACCEL_G:
+            return f"|accel| {accel:.6g} g exceeds {MAX_ACCEL_G:g}"
+        return ""
+    mag = max(abs(v) for v in values)
+    return f"|mag| {mag:.6g} a.u. exceeds {MAX_MAG_AU:g}" if mag > MAX_MAG_AU else ""
+
+
 ParseResult = Union[InertialFrame, MagnetometerFrame, tuple[RejectReason, str], None]
 
 
@@ -174,6 +195,9 @@ def parse_message(line: bytes) -> ParseResult:
         values = layout.unpack(body)
         if not math.isfinite(sum(values[2:])):  # one NaN or inf makes the sum non-finite
             return RejectReason.NOT_FINITE, "NaN or infinity in a binary message"
+        beyond = _beyond_range(layout is BINARY_INERTIAL, values[2:])
+        if beyond:
+            return RejectReason.OUT_OF_RANGE, beyond
         if layout is BINARY_INERTIAL:
             return InertialFrame(values[1], values[2:5], values[5:8], line)
         return MagnetometerFrame(values[1], values[2:5], line)
@@ -189,6 +213,9 @@ def parse_message(line: bytes) -> ParseResult:
         numbers = array.array("f", map(float, match.groups()[1:])).tolist()  # f32, as the device sends
         if not math.isfinite(sum(numbers)):
             return RejectReason.NOT_FINITE, "number out of f32 range"
+        beyond = _beyond_range(first == INERTIAL_ID, numbers)
+        if beyond:
+            return RejectReason.OUT_OF_RANGE, beyond
         if first == INERTIAL_ID:
             return InertialFrame(timestamp_us, tuple(numbers[0:3]), tuple(numbers[3:6]), line)  # type: ignore[arg-type]
         return MagnetometerFrame(timestamp_us, tuple(numbers), line)  # type: ignore[arg-type]
@@ -215,6 +242,7 @@ class Ximu3Decoder:
         self._offset = 0  # stream position of _pending[0]
         self._discarding = False  # inside an overlong line, until its LF
         self._last_timestamp_us: int | None = None
+        self._previous_timestamp_us: int | None = None  # the frame accepted before the last
         self._unconfirmed_us: int | None = None  # a salvage candidate seen before any accepted frame
         self._bytes_fed = 0
         self._inertial = 0
@@ -259,7 +287,7 @@ class Ximu3Decoder:
         self._offset += len(self._pending)
         self._pending = b""
         self._discarding = False
-        self._last_timestamp_us = self._unconfirmed_us = None
+        self._last_timestamp_us = self._previous_timestamp_us = self._unconfirmed_us = None
         return out  # type: ignore[return-value]
 
     @property
@@ -303,10 +331,14 @@ class Ximu3Decoder:
                  lowest_start: int) -> bool:
         """Decode the shortest valid I/M suffix of a damaged line; reject the bytes before it.
 
-        Its timestamp must lie within salvage_window_us of the last accepted frame. Before any
-        frame was accepted, a candidate is only remembered, and the next damaged line's candidate
-        within the window of it is accepted: garbage before every message costs the first one."""
+        Its timestamp must lie within salvage_window_us of the last accepted frame or of the one
+        before it: binary messages carry no checksum, so a damaged timestamp can be accepted, and
+        found by fuzzing, it must not make the next salvage fail. Before any frame was accepted, a
+        candidate is only remembered, and the next damaged line's candidate within the window of
+        it is accepted: garbage before every message costs the first one."""
         reference = self._last_timestamp_us if self._last_timestamp_us is not None else self._unconfirmed_us
+        window = self.salvage_window_us
+        previous = self._previous_timestamp_us
         lowest = max(lowest_start, len(line) - SALVAGE_SEARCH_BYTES)
         starts = [match.start() for match in _MESSAGE_START.finditer(line, lowest)]
         candidate_us: int | None = None
@@ -314,7 +346,8 @@ class Ximu3Decoder:
             parsed = parse_message(line[start:])
             if not isinstance(parsed, (InertialFrame, MagnetometerFrame)):
                 continue
-            if reference is not None and abs(parsed.timestamp_us - reference) <= self.salvage_window_us:
+            if (reference is not None and abs(parsed.timestamp_us - reference) <= window) or (
+                    previous is not None and abs(parsed.timestamp_us - previous) <= window):
                 if start:
                     self._reject(out, line[:start], prefix_reason, offset,
                                  f"{start} bytes before a message at byte {offset + start}")
@@ -332,6 +365,7 @@ class Ximu3Decoder:
                      f"no LF within {self.max_message_bytes} bytes at byte {offset}")
 
     def _accept(self, frame: InertialFrame | MagnetometerFrame, out: list[Frame]) -> None:
+        self._previous_timestamp_us = self._last_timestamp_us
         self._last_timestamp_us = frame.timestamp_us
         self._unconfirmed_us = None
         if isinstance(frame, InertialFrame):

@@ -152,6 +152,20 @@ class BleSources:
 
     # -- consumer side (the edge loop's thread) ---------------------------------------------------
 
+    @property
+    def device_ranges(self) -> dict[str, tuple[float, float] | None]:
+        """Full scales per IMU, for saturation (edge/device_health.py)."""
+        from edge.device_health import DEVICE_RANGES
+
+        return {imu.sensor_id: DEVICE_RANGES["thingy52"] for imu in self.imus}
+
+    def link(self, sensor_id: str) -> tuple[bool, int, float]:
+        """(connected, reconnects, battery_pct); the battery service is not read yet (-1)."""
+        stats = self.stats.get(sensor_id)
+        if stats is None:
+            return False, 0, -1.0
+        return stats.connects > stats.link_losses, stats.reconnects, -1.0
+
     def __iter__(self) -> Iterator[Any]:
         while True:
             try:
