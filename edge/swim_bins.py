@@ -15,6 +15,9 @@ Each row sums `rate / BIN_HZ` samples (10 at 1000 Hz):
                   is about a horizontal axis)
     surge_g       mean forward (body x) specific force, raw: stroke surges show in it
     rate_dps      mean magnitude of the rotation rate (strokes roll the body: never near 0 in a length)
+    gyro_x/y/z    mean rotation rate in the body frame, Fusion's gyroscope offset removed (dps): at rest,
+                  what is left of the gyro's offset (edge/swim_length.RestGyro)
+    up_x/y/z      the vertical in the body frame at the row's end (the axis the heading turns about)
 While the AHRS is still settling (its first seconds) head_x/y are 0: no heading, no push-off.
 Pure computation, no I/O; memory is the AHRS state and one row.
 """
@@ -31,8 +34,9 @@ from edge.mounting import seat_to_chair
 
 G = 9.80665
 BIN_HZ = 100.0
-COLUMNS = ("t_ns", "dv_x", "dv_y", "head_x", "head_y", "yaw_dps", "surge_g", "rate_dps")
-T, DV_X, DV_Y, HEAD_X, HEAD_Y, YAW, SURGE, RATE = range(len(COLUMNS))
+COLUMNS = ("t_ns", "dv_x", "dv_y", "head_x", "head_y", "yaw_dps", "surge_g", "rate_dps",
+           "gyro_x", "gyro_y", "gyro_z", "up_x", "up_y", "up_z")
+T, DV_X, DV_Y, HEAD_X, HEAD_Y, YAW, SURGE, RATE, GYRO_X, GYRO_Y, GYRO_Z, UP_X, UP_Y, UP_Z = range(len(COLUMNS))
 # Fusion's defaults (gain 0.5, acceleration rejection 10 deg, 5 s recovery) suit a body whose
 # accelerations average out over a stroke cycle; the turn and push-off (up to ~1.5 g) are
 # rejected as disagreeing with gravity and do not tilt the estimate.
@@ -101,7 +105,8 @@ class BodyBinner:
                 if ahrs.get_flags().startup:
                     head_x = head_y = 0.0
                 rows.append((int(time_ns[i]), acc_sum[0] * G * self.dt, acc_sum[1] * G * self.dt, head_x, head_y,
-                             float(gyro_sum @ up) / n, acc_sum[2] / n, acc_sum[3] / n))
+                             float(gyro_sum @ up) / n, acc_sum[2] / n, acc_sum[3] / n,
+                             gyro_sum[0] / n, gyro_sum[1] / n, gyro_sum[2] / n, up[0], up[1], up[2]))
                 acc_sum[:] = 0.0
                 gyro_sum[:] = 0.0
                 self._count = 0

@@ -11,7 +11,6 @@ for the next push-off.
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,7 +18,7 @@ import numpy as np
 
 from edge import swim_walls as walls
 from edge.swim_bins import BIN_HZ, COLUMNS, BinSettings, BodyBinner
-from edge.swim_length import drift_learner, lane_reading, reckon_length
+from edge.swim_length import RestGyro, drift_learner, lane_reading, reckon_length
 from edge.swim_paper import LengthEstimate
 from protocol import messages
 from protocol.session import Agent, Mount, Route, Sensor
@@ -28,6 +27,15 @@ log = logging.getLogger(__name__)
 MAX_LENGTH_S = 300.0  # a 25 m length takes 15-60 s; a 50 m one up to 2 min
 PRE_PUSH_S = 2.0  # rows kept before a push-off (its onset search looks back)
 TURN_WAIT_S = 6.0  # after a heading reversal, the push-off comes within this, or the set has ended
+# A length's velocity is taken zero at its touch (where the body's deceleration into the wall
+# ends, edge/swim_walls.py) rather than at the next push-off: in the open turn between them (tuck,
+# 50 deg of pitch, half a turn in 1.2-2 s) the attitude filter leaks 0.3-0.7 m/s into the velocity
+# (simulated waist crawl diagonal sets against the exact motion), and removed as a line over the
+# whole length that turn's leak bent the diagonal's speed profile (docs/swim-estimator.md, "What
+# limits the diagonal"). Where the filter's leak over the length is far from a line (the head in
+# backstroke and butterfly), the touch can leave the swimmer going backwards for a third of the
+# length; a swimmer never does, so past BACKWARD_MAX the end that goes backwards least is taken.
+BACKWARD_MAX = 0.2  # share of the travel: a crawler's touch leaves 0-0.01, a kickboard's to 0.11
 
 
 @dataclass
@@ -53,6 +61,7 @@ class SwimTracker:
         self.push: int | None = None  # row of the current length's push-off onset
         self.reversal: int | None = None  # row of a heading reversal waiting for its push-off
         self.drift = drift_learner(sensor.mount)  # the heading's drift rate, carried from length to length
+        self.rest = RestGyro()  # the gyro's offset read at rest before a set, for its first length
         self.counters = TrackerCounters()
 
     def push_samples(self, time_ns: np.ndarray, accel_g: np.ndarray, gyro_dps: np.ndarray) -> list[LengthEstimate]:
@@ -81,6 +90,9 @@ class SwimTracker:
     def _examine(self, i: int) -> list[LengthEstimate]:
         rows = self.rows
         if self.push is None:
+            # Between sets only: within a length the glide or a pause can look still (and a turn's
+            # rows are the previous length's).
+            self.rest.add(rows[i:i + 1])
             found = walls.find_push(rows[:i + 1], max(0, i - walls.rows_for(1.0)), i)
             if found is not None:
                 self._start(found[0])
@@ -96,7 +108,8 @@ class SwimTracker:
                 # at the wall, or once it is at rest? Coming upright at the wall (70 deg of pitch in
                 # about a second) can tilt the attitude in between, and its leak, spread over the
                 # length, took up to 20-86 % off a length whichever single row was chosen (seeds
-                # 1-2). Take the one whose integration needs the least scaling to the pool length.
+                # 1-2). The touch, unless another leaves the swimmer going backwards less
+                # (pick_zero_end).
                 still_from = i - walls.rows_for(walls.STILL_S)
                 touch = walls.touch_before_rest(rows, still_from, self.push, self.board)
                 return self._close(touch, touch, other_stops=(still_from, i))
@@ -126,12 +139,13 @@ class SwimTracker:
             self.counters.failed += 1
             return []
         rows = self.rows[:self.n]
-        if self.drift is not None:
-            self.drift = self.drift.learn(lane_reading(rows, push, touch, stop, self.route))
-        drift_dps = self.drift.rate_dps if self.drift is not None else 0.0
-        estimates = [reckon_length(rows, push, touch, zero_at, self.pool_length_m, self.route, drift_dps=drift_dps)
-                     for zero_at in (stop, *other_stops) if touch <= zero_at]
-        estimate = min(estimates, key=_rescaling)
+        # The velocity's zero at the touch, else at `stop` (the next push-off) or a rest (BACKWARD_MAX).
+        zeros = tuple(dict.fromkeys((touch, stop, *other_stops)))
+        self.drift = self.drift.learn(lane_reading(rows, push, touch, touch, self.route,
+                                                   rest_offset_dps=self.rest.take()))
+        estimates = [reckon_length(rows, push, touch, zero_at, self.pool_length_m, self.route,
+                                   drift_dps=self.drift.rate_dps) for zero_at in zeros if touch <= zero_at]
+        estimate = pick_zero_end(estimates)
         if not np.isfinite(estimate.swum_distance_m):
             self.counters.failed += 1
             return []
@@ -155,10 +169,13 @@ class SwimTracker:
         self._shift(self.n - walls.rows_for(PRE_PUSH_S))
 
 
-def _rescaling(estimate: LengthEstimate) -> float:
-    """How far the length's scale to the pool length is from 1 (|log k|; inf if undefined)."""
-    k = estimate.scale
-    return abs(math.log(k)) if math.isfinite(k) and k > 0 else math.inf
+def pick_zero_end(estimates: list[LengthEstimate]) -> LengthEstimate:
+    """Of one length's estimates with different zero-velocity ends (the touch first), the first,
+    unless its swimmer goes backwards for more than BACKWARD_MAX of the travel: then the one that
+    goes backwards least (the first of equals)."""
+    if estimates[0].backward_share <= BACKWARD_MAX:
+        return estimates[0]
+    return min(estimates, key=lambda estimate: estimate.backward_share)
 
 
 @dataclass

@@ -16,12 +16,12 @@ body's roll and pitch), and headings are the quaternion's, not a z gyro's integr
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.signal import butter, find_peaks, sosfiltfilt
 
-from edge.swim_bins import DV_X, DV_Y, HEAD_X, HEAD_Y, SURGE, T
+from edge.swim_bins import DV_X, DV_Y, GYRO_X, GYRO_Z, HEAD_X, HEAD_Y, RATE, SURGE, T, UP_X, UP_Z
 from edge.swim_paper import LengthEstimate, lateral_profile
 from protocol.session import Mount, Route, route_end_heading_rad
 
@@ -42,6 +42,16 @@ DRIFT_PRIOR_SD_DPS = 0.5
 DRIFT_PAIR_SD_DPS = 0.08
 DRIFT_WITHIN_SD_DPS = 0.4
 DRIFT_WALK_DPS = 0.02
+# RestGyro. Floating still at the wall before a set (3-5 s, nearly upright) every gyro axis reads
+# its offset; projected on the swimming vertical it is the heading's drift, within 0.1 deg/s of the
+# drift learnt over 4 lengths (simulated waist crawl sets, seeds 1, 3, 6: -0.25 / -0.22, 0.65 / 0.55,
+# 0.53 / 0.53; the body-frame offsets within 0.2 of the drawn ones, the vertical's component within
+# 0.05, waist and head, seeds 1-6). SD taken 0.15: a real swimmer at the wall sways more than the
+# simulator's 0.3 deg. Rest: rotation under REST_RATE_DPS (edge/swim_walls.STILL_RATE_DPS: at rest every
+# sensor reads at most 2 deg/s, swimming at least 9.5) for REST_MIN_S in a row.
+DRIFT_REST_SD_DPS = 0.15
+REST_RATE_DPS = 5.0
+REST_MIN_S = 1.5
 DRIFT_GATE_SD = 3.0
 DRIFT_PAIR_MAX_S = 180.0
 DRIFT_RESIDUAL_MAX_DEG = 25.0
@@ -76,6 +86,7 @@ class LaneReading:
     heading_rad: float
     time_ns: int
     drift_dps: float
+    rest_dps: float = math.nan  # the drift the rest before the length read (RestGyro), if one came before it
 
 
 @dataclass(frozen=True)
@@ -99,7 +110,7 @@ class YawDrift:
     def learn(self, lane: LaneReading) -> "YawDrift":
         """The state after the next length's reading (its predecessor's is `last`)."""
         rate, variance = self.rate_dps, self.variance + DRIFT_WALK_DPS ** 2
-        readings = [(lane.drift_dps, DRIFT_WITHIN_SD_DPS)]
+        readings = [(lane.rest_dps, DRIFT_REST_SD_DPS), (lane.drift_dps, DRIFT_WITHIN_SD_DPS)]
         if self.last is not None:
             gap_s = (lane.time_ns - self.last.time_ns) * 1e-9
             residual = math.degrees(math.remainder(lane.heading_rad - self.last.heading_rad - math.pi, 2 * math.pi))
@@ -115,16 +126,44 @@ class YawDrift:
         return YawDrift(rate, variance, lane)
 
 
-def drift_learner(mount: Mount) -> YawDrift | None:
-    """A new YawDrift for a body-worn sensor; None for a kickboard, whose heading is the board's:
-    turned by hand at the wall, it does not reverse onto the lane (measured on simulated diagonal
-    sets, seeds 1-6: -9.2 / 26.1 % with the drift learnt, -8.3 / 27.5 without)."""
-    return None if mount is Mount.KICKBOARD else YawDrift()
+def drift_learner(mount: Mount) -> YawDrift:
+    """A new YawDrift, for every mounting. A kickboard's heading is the board's, turned by hand at
+    the wall, and learning it once made its diagonals worse (-9.2 / 26.1 % against -8.3 / 27.5 without,
+    simulated sets, seeds 1-6) while the velocity's zero was the next push-off; with the zero at the
+    touch it helps (the same sets: diagonal -2.00 / 8.96 % RMS 4.09 -> -1.72 / 5.24 RMS 3.04, straight
+    +0.17 / 0.56 -> +0.02 / 0.16): the gate refuses the hand turns' readings."""
+    return YawDrift()
+
+
+@dataclass
+class RestGyro:
+    """The mean body-frame rate of the last rest (rows whose rotation stays under REST_RATE_DPS for
+    REST_MIN_S or more), fed row by row; `take()` hands it to the length that follows, once.
+    Fixed-size: a sum, a count and the last rest's mean."""
+
+    total: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    count: int = 0
+    offset_dps: np.ndarray | None = None
+
+    def add(self, rows: np.ndarray, rate_hz: float = 100.0) -> None:
+        for row in rows:
+            if row[RATE] < REST_RATE_DPS:
+                self.total += row[GYRO_X:GYRO_Z + 1]
+                self.count += 1
+                continue
+            if self.count >= REST_MIN_S * rate_hz:
+                self.offset_dps = self.total / self.count
+            self.total, self.count = np.zeros(3), 0
+
+    def take(self) -> np.ndarray | None:
+        offset, self.offset_dps = self.offset_dps, None
+        return offset
 
 
 def lane_reading(rows: np.ndarray, push: int, touch: int, stop: int, route: Route,
-                 rate_hz: float = 100.0) -> LaneReading:
-    """The headings of rows[push..touch] that YawDrift learns from."""
+                 rate_hz: float = 100.0, rest_offset_dps: np.ndarray | None = None) -> LaneReading:
+    """The headings of rows[push..touch] that YawDrift learns from (and the rest's gyro offset before
+    them, projected on the length's mean vertical)."""
     t_s, head, _, step = _body_track(rows, push, touch, stop, rate_hz)
     window = _lane_window(step, route)
     lane = head[window].sum(axis=0)
@@ -135,7 +174,11 @@ def lane_reading(rows: np.ndarray, push: int, touch: int, stop: int, route: Rout
     if before.any() and after.any():
         turned = math.remainder(_angle(head[after]) - _angle(head[before]) - route_end_heading_rad(route), 2 * math.pi)
         drift = math.degrees(turned) / float(t_s[after].mean() - t_s[before].mean())
-    return LaneReading(math.atan2(lane[1], lane[0]), int(rows[push, T] + middle * 1e9), drift)
+    rest = math.nan
+    if rest_offset_dps is not None and window.any():
+        up = rows[push:touch + 1][window, UP_X:UP_Z + 1].mean(axis=0)
+        rest = float(rest_offset_dps @ up)
+    return LaneReading(math.atan2(lane[1], lane[0]), int(rows[push, T] + middle * 1e9), drift, rest)
 
 
 def reckon_length(rows: np.ndarray, push: int, touch: int, stop: int, pool_length_m: float, route: Route,
@@ -162,8 +205,10 @@ def reckon_length(rows: np.ndarray, push: int, touch: int, stop: int, pool_lengt
     turned = math.degrees(math.remainder(end_heading - start_heading, 2 * math.pi)) - drift_dps * t_s[-1]
     expected = math.degrees(route_end_heading_rad(route))
     strokes = count_strokes(rows[push + int(GLIDE_S * rate_hz):push + n, SURGE], rate_hz)
+    backward = float(-step[step < 0].sum() / max(float(np.abs(step).sum()), 1e-9))
     return LengthEstimate(int(rows[push, T]), int(rows[touch, T]), swum, float(lane_m[-1]), scale,
-                          turned - expected, lateral_profile(lane_m, cross_m), stroke_count=strokes)
+                          turned - expected, lateral_profile(lane_m, cross_m), stroke_count=strokes,
+                          backward_share=backward)
 
 
 def _body_track(rows: np.ndarray, push: int, touch: int, stop: int,

@@ -46,6 +46,9 @@ class LengthEstimate:
     lateral_m: np.ndarray
     profile_step_m: float = PROFILE_STEP_M
     stroke_count: int = 0
+    # Share of the travel along the heading that went backwards (ours; 0 for the paper's). A swimmer
+    # does not swim backwards: much of it means the velocity's drift was taken out wrongly.
+    backward_share: float = 0.0
 
     @property
     def duration_s(self) -> float:

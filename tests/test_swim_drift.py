@@ -1,4 +1,5 @@
-"""The heading's drift about the vertical, learnt from the pool (edge/swim_length.YawDrift)."""
+"""The heading's drift about the vertical, learnt from the pool (edge/swim_length.YawDrift) and read
+at rest before a set (RestGyro)."""
 
 from __future__ import annotations
 
@@ -6,8 +7,8 @@ import math
 
 import numpy as np
 
-from edge.swim_bins import T, BinSettings, BodyBinner
-from edge.swim_length import LaneReading, YawDrift, drift_learner, lane_reading, reckon_length
+from edge.swim_bins import COLUMNS, GYRO_X, GYRO_Y, GYRO_Z, RATE, T, BinSettings, BodyBinner
+from edge.swim_length import LaneReading, RestGyro, YawDrift, drift_learner, lane_reading, reckon_length
 from protocol.session import Mount, Route
 from sim_devices.swim.simulate import simulate_set
 
@@ -46,9 +47,10 @@ def test_first_length_uses_its_own_turn_and_wild_readings_are_refused() -> None:
     assert settled.learn(sideways).rate_dps == settled.rate_dps
 
 
-def test_a_kickboard_learns_no_drift() -> None:
-    assert drift_learner(Mount.KICKBOARD) is None
-    assert isinstance(drift_learner(Mount.WAIST), YawDrift)
+def test_every_mounting_learns_its_drift() -> None:
+    # The kickboard too, since the velocity's zero is the touch (edge/swim_length.drift_learner).
+    mounts = (Mount.WAIST, Mount.BACK, Mount.HEAD, Mount.KICKBOARD)
+    assert all(isinstance(drift_learner(mount), YawDrift) for mount in mounts)
 
 
 def test_drift_learnt_on_a_simulated_diagonal_set_corrects_its_lengths() -> None:
@@ -67,3 +69,37 @@ def test_drift_learnt_on_a_simulated_diagonal_set_corrects_its_lengths() -> None
     assert 0.45 < drift.rate_dps < 0.65
     assert max(abs(e) for e in with_drift[1:]) < 2.5  # lengths 2-4 have the pair readings
     assert min(abs(e) for e in without[1:]) > 3.0
+
+
+def _rest_rows(seconds: float, rate_dps: float, gyro_dps: tuple[float, float, float]) -> np.ndarray:
+    rows = np.zeros((int(seconds * 100), len(COLUMNS)))
+    rows[:, RATE] = rate_dps
+    rows[:, [GYRO_X, GYRO_Y, GYRO_Z]] = gyro_dps
+    return rows
+
+
+def test_the_rest_before_a_set_reads_the_gyro_offset_once() -> None:
+    rest = RestGyro()
+    rest.add(_rest_rows(1.0, 1.0, (9.0, 9.0, 9.0)))  # too short a rest
+    rest.add(_rest_rows(0.1, 60.0, (0.0, 0.0, 0.0)))
+    assert rest.take() is None
+    rest.add(_rest_rows(3.0, 1.0, (0.1, 0.2, -0.3)))
+    assert rest.offset_dps is None  # still resting: not over yet
+    rest.add(_rest_rows(0.1, 60.0, (50.0, 0.0, 0.0)))  # comes horizontal to push off
+    assert np.allclose(rest.take(), (0.1, 0.2, -0.3))
+    assert rest.take() is None  # the set's first length only
+    assert rest.total.shape == (3,)  # fixed-size, however long the rest
+
+
+def test_the_rest_reads_a_simulated_sets_drift_before_its_first_length() -> None:
+    # Seed 3 (as above, +0.55 deg/s): floating still at the wall before the set (pitched 70 deg)
+    # every gyro axis reads its offset, and projected on the swimming vertical it is the drift.
+    streams, truth = simulate_set("crawl", Route.DIAGONAL, [Mount.WAIST], 1, 3)
+    rows = BodyBinner(BinSettings(1000.0, "+x", "+y")).push(streams[0].time_ns, streams[0].accel_g, streams[0].gyro_dps)
+    push, touch = (int(i) for i in np.searchsorted(rows[:, T], [truth.push_ns[0], truth.touch_ns[0]]))
+    rest = RestGyro()
+    rest.add(rows[:push])
+    lane = lane_reading(rows, push, touch, touch, Route.DIAGONAL, rest_offset_dps=rest.take())
+    assert abs(lane.rest_dps - 0.55) < 0.15  # 0.66: the rest's sway; DRIFT_REST_SD_DPS is 0.15
+    first = YawDrift().learn(lane)
+    assert abs(first.rate_dps - 0.55) < 0.1 and first.variance < 0.15 ** 2  # not shrunk to the prior's 0

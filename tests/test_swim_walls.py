@@ -18,7 +18,7 @@ from edge import swim_walls as walls
 from edge.swim_bins import BIN_HZ, COLUMNS, DV_X, G, HEAD_X, HEAD_Y, RATE, SURGE, YAW
 from edge.swim_edge import SwimTracker
 from protocol.session import Mount, Route, Sensor
-from reckon.evaluation.swim_eval import SwimReport, _score_detected, to_json
+from reckon.evaluation.swim_eval import SwimReport, _score_detected, to_json, to_table
 from sim_devices.swim import simulate_set
 
 
@@ -102,16 +102,21 @@ def test_waist_crawl_walls_and_distances(route):
 def test_eval_scores_walls_pooled_and_per_mounting():
     report = SwimReport(Path("x.mcap"), 25.0)
 
-    def length(start_s: float, end_s: float):
+    def length(start_s: float, end_s: float, strokes: int = 20):
         return SimpleNamespace(start_ns=int(start_s * 1e9), end_ns=int(end_s * 1e9), timestamp_ns=int(end_s * 1e9),
-                               swum_distance_m=25.0)
+                               swum_distance_m=25.0, stroke_count=strokes)
 
     truth = [length(5, 25), length(27, 47)]
     common = dict(agent_id="a", route="straight", stroke="crawl")
-    _score_detected(report, [length(5.0, 25.1), length(27.0, 47.1)], truth, dict(common, sensor_id="w", mounting="waist"))
+    _score_detected(report, [length(5.0, 25.1, 21), length(27.0, 47.1, 17)], truth,
+                    dict(common, sensor_id="w", mounting="waist"))
     _score_detected(report, [length(5.0, 25.5), length(30.0, 40.0)], truth,
                     dict(common, sensor_id="k", mounting="kickboard"))
     out = to_json(report)
+    # Stroke counts against TruthLength's, per length matched: the waist's +1 and -3.
+    waist_lengths = next(r for r in out["results"] if r["mounting"] == "waist")
+    assert waist_lengths["stroke_count_error"] == {"mean": -1.0, "max_abs": 3, "mean_abs_pct": 10.0}
+    assert "strokes" in to_table(report).splitlines()[1]
     assert out["turns"]["true_walls"] == 4 and out["turns"]["matched"] == 3 and out["turns"]["false"] == 1
     waist, board = out["turns_by_mounting"]["waist"], out["turns_by_mounting"]["kickboard"]
     assert waist["precision"] == waist["recall"] == 1.0 and waist["timing_error_s_p90"] == pytest.approx(0.1)

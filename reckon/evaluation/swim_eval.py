@@ -5,10 +5,11 @@
 - reckon, true walls: our length estimate given the true wall times, to tell the estimator's error
   from the wall detector's.
 Distances are scored per length against the simulator's truth (TruthLength: the body centre's
-path from push-off to touch). Wall detection is scored on the touches: a detected touch within
-MATCH_S of a true one is a hit (one to one, nearest first); timing error is |detected - true|.
-`turns` pools every sensor of the session (all mountings and strokes); the issue's turn goal is
-stated for the paper's setting, the waist sensor, so `turns_by_mounting` gives each mounting's own.
+path from push-off to touch), and so are our stroke counts (TruthLength's stroke_count). Wall
+detection is scored on the touches: a detected touch within MATCH_S of a true one is a hit (one to
+one, nearest first); timing error is |detected - true|. `turns` pools every sensor of the session
+(all mountings and strokes); the issue's turn goal is stated for the paper's setting, the waist
+sensor, so `turns_by_mounting` gives each mounting's own.
 """
 
 from __future__ import annotations
@@ -23,8 +24,8 @@ import numpy as np
 
 from edge.mounting import seat_to_chair
 from edge.swim_bins import BinSettings, BodyBinner, T
-from edge.swim_edge import SwimTracker
-from edge.swim_length import drift_learner, lane_reading, reckon_length
+from edge.swim_edge import SwimTracker, pick_zero_end
+from edge.swim_length import RestGyro, drift_learner, lane_reading, reckon_length
 from edge.swim_paper import paper_length
 from protocol.errors import InputError
 from protocol.session import AgentKind, Mount, Route, route_end_heading_rad
@@ -52,10 +53,18 @@ class LengthScore:
     index: int
     truth_m: float
     estimate_m: float
+    # Strokes per length (TruthLength: arm strokes, leg beats for a kick); None where the method
+    # counts none (the paper's).
+    truth_strokes: int | None = None
+    strokes: int | None = None
 
     @property
     def error_pct(self) -> float:
         return 100.0 * (self.estimate_m - self.truth_m) / self.truth_m
+
+    @property
+    def stroke_error(self) -> int | None:
+        return None if self.strokes is None or self.truth_strokes is None else self.strokes - self.truth_strokes
 
 
 @dataclass
@@ -141,16 +150,23 @@ def _true_walls(report: SwimReport, rows: np.ndarray, truth: list[Any], pool: fl
                 common: dict[str, Any]) -> None:
     times = rows[:, T]
     drift = drift_learner(Mount(common["mounting"]))
+    rest = RestGyro()  # as the live tracker: the rest before the set read for its first length's drift
     for k, length in enumerate(truth, start=1):
         push, touch = (int(i) for i in np.searchsorted(times, [length.start_ns, length.timestamp_ns]))
-        following = truth[k].start_ns if k < len(truth) else length.timestamp_ns + 2_000_000_000
+        if k == 1:
+            rest.add(rows[:push])
+        last = k == len(truth)
+        following = length.timestamp_ns + 2_000_000_000 if last else truth[k].start_ns
         stop = min(int(np.searchsorted(times, following)), len(rows) - 1)
         touch = min(touch, stop)
-        if drift is not None:
-            drift = drift.learn(lane_reading(rows, push, touch, stop, route))
-        estimate = reckon_length(rows, push, touch, stop, pool, route, drift_dps=drift.rate_dps if drift else 0.0)
+        # As the live tracker: zero velocity at the touch, or at the next push-off (a set's last
+        # length: 2 s into the rest) if the touch's leaves the swimmer going backwards.
+        drift = drift.learn(lane_reading(rows, push, touch, touch, route, rest_offset_dps=rest.take()))
+        estimate = pick_zero_end([reckon_length(rows, push, touch, zero_at, pool, route, drift_dps=drift.rate_dps)
+                                  for zero_at in (touch, stop)])
         report.lengths.append(LengthScore("reckon, true walls", index=k, truth_m=length.swum_distance_m,
-                                          estimate_m=estimate.swum_distance_m, **common))
+                                          estimate_m=estimate.swum_distance_m, truth_strokes=length.stroke_count,
+                                          strokes=estimate.stroke_count, **common))
 
 
 def _score_detected(report: SwimReport, detected: list[Any], truth: list[Any], common: dict[str, Any]) -> None:
@@ -171,7 +187,8 @@ def _score_detected(report: SwimReport, detected: list[Any], truth: list[Any], c
             turns.timing_errors_s.append(gap * 1e-9)
             turns.push_errors_s.append(abs(detected[i].start_ns - truth[j].start_ns) * 1e-9)
         report.lengths.append(LengthScore("reckon", index=j + 1, truth_m=truth[j].swum_distance_m,
-                                          estimate_m=detected[i].swum_distance_m, **common))
+                                          estimate_m=detected[i].swum_distance_m, truth_strokes=truth[j].stroke_count,
+                                          strokes=detected[i].stroke_count, **common))
     report.missed[common["mounting"]] += len(truth) - len(used_t)
 
 
@@ -191,6 +208,7 @@ def to_json(report: SwimReport) -> dict[str, Any]:
             "true_distance_m": {"min": _r(min(s.truth_m for s in scores)), "max": _r(max(s.truth_m for s in scores))},
             **({"paper_reported_m": list(PAPER_REPORTED_M[(mounting, route)])}
                if method == "paper" and (mounting, route) in PAPER_REPORTED_M else {}),
+            **({"stroke_count_error": strokes} if (strokes := _stroke_errors(scores)) else {}),
         })
     return {
         "session": str(report.session_path),
@@ -199,6 +217,18 @@ def to_json(report: SwimReport) -> dict[str, Any]:
         "turns_by_mounting": {mounting: _turns_json(t) for mounting, t in sorted(report.turns_by_mounting.items())},
         "problems": report.problems,
     }
+
+
+def _stroke_errors(scores: list[LengthScore]) -> dict[str, Any] | None:
+    """Counted minus true strokes per length: mean, max |error| (strokes) and mean |error| in % of
+    the true count; None when the method counts no strokes."""
+    pairs = [(s.stroke_error, s.truth_strokes) for s in scores if s.stroke_error is not None]
+    if not pairs:
+        return None
+    errors = np.array([e for e, _ in pairs], dtype=float)
+    truth = np.array([max(t or 0, 1) for _, t in pairs], dtype=float)
+    return {"mean": _r(float(errors.mean()), 2), "max_abs": int(np.abs(errors).max()),
+            "mean_abs_pct": _r(float(np.mean(np.abs(errors) / truth) * 100.0), 1)}
 
 
 def _turns_json(t: TurnScore) -> dict[str, Any]:
@@ -211,15 +241,18 @@ def _turns_json(t: TurnScore) -> dict[str, Any]:
 def to_table(report: SwimReport) -> str:
     lines = [f"session {report.session_path}: swum distance per length, pool {report.pool_length_m:g} m",
              f"{'method':19} {'stroke':12} {'mounting':9} {'route':8} {'n':>3} {'err mean %':>10} {'max |err| %':>11} "
-             f"{'estimates m':>13} {'truth m':>13} {'paper reported':>15}"]
+             f"{'estimates m':>13} {'truth m':>13} {'paper reported':>15} {'strokes: err mean / max, |%|':>28}"]
     for (method, mounting, route, stroke), scores in report.groups().items():
         errors = np.array([s.error_pct for s in scores])
         est = [s.estimate_m for s in scores]
         tru = [s.truth_m for s in scores]
         reported = PAPER_REPORTED_M.get((mounting, route)) if method == "paper" and stroke in ("crawl", "kick") else None
+        strokes = _stroke_errors(scores)
         lines.append(f"{method:19} {stroke:12} {mounting:9} {route:8} {len(scores):3d} {errors.mean():10.2f} "
                      f"{np.abs(errors).max():11.2f} {min(est):6.2f}-{max(est):6.2f} {min(tru):6.2f}-{max(tru):6.2f} "
-                     + (f"{reported[0]:6.2f}-{reported[1]:6.2f}" if reported else f"{'-':>15}"))
+                     + (f"{reported[0]:6.2f}-{reported[1]:6.2f}" if reported else f"{'-':>15}")
+                     + (f" {strokes['mean']:+9.2f} / {strokes['max_abs']:3d}, {strokes['mean_abs_pct']:5.1f} %"
+                        if strokes else f" {'-':>28}"))
     fmt = lambda v: "-" if v is None else f"{v:.3f}"  # noqa: E731
 
     def turn_line(name: str, t: TurnScore) -> str:
