@@ -424,7 +424,7 @@ def build_parser() -> argparse.ArgumentParser:
                                             "seen by a stereo head tracker (docs/simulator-room.md)")
     room.add_argument("--seed", type=int, default=1)
     room.add_argument("--people", type=int, default=3, help="wearers (the paper: 3); the room grows with them")
-    room.add_argument("--duration", type=float, default=120.0, help="seconds")
+    room.add_argument("--duration", type=float, default=297.0, help="seconds (the paper's recording: 297)")
     room.add_argument("--no-camera", action="store_true", help="leave the tracker's frames out")
     room.add_argument("-o", "--output", required=True)
     room.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",

@@ -235,6 +235,21 @@ def test_presets_and_overrides():
         simulate_tracks([_line("a", (0, 0), (1, 1), 1.0)] * 2, AREA, COURT, np.random.default_rng(1))
 
 
+def test_room_preset_is_calibrated_against_the_papers_result():
+    """ROOM: no swaps and rare fusions (calibrated against the paper's Table 2, docs/simulator-camera.md);
+    a close pass then never exchanges two people's ids, and fusions stay in the calibrated band."""
+    assert ROOM.switches.probability == 0.0 and ROOM.merges.probability == pytest.approx(0.1)
+    assert "calibrated" in describe(ROOM, "room")[[k for k, *_ in describe(ROOM, "room")].index("switches.probability")][3]
+    quiet = _quiet(ROOM, merges__probability="0")
+    for seed in range(20):
+        recording = simulate_tracks(_crossing(), AREA, quiet, np.random.default_rng(seed))
+        assert recording.counters["switches"] == 0
+        assert all(len(set(_who(recording, tid))) == 1 for tid in {t for f in recording.frames for t in f.track_id.tolist()})
+    fused = sum(simulate_tracks(_crossing(), AREA, _quiet(ROOM, merges__probability="0.1"),
+                                np.random.default_rng(seed)).counters["merges"] for seed in range(200))
+    assert 8 <= fused <= 35  # 200 close passes at 0.1: 20 expected
+
+
 def test_docs_list_every_parameter_with_both_presets_and_sources():
     text = DOCS.read_text(encoding="utf-8")
     for (key, room, unit, room_source), (_, court, _, court_source) in zip(describe(ROOM, "room"), describe(COURT)):

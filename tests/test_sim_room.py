@@ -18,6 +18,7 @@ from sim_devices.room import RoomParams, describe, error_free, params_with_overr
 from sim_devices.room.activities import Activity
 from sim_devices.room.calibration import Track, fit
 from sim_devices.room.imu import waist_imu
+from sim_devices.room.params import away_shares
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "simulator-room.md"
 PAPER_R = 0.91
@@ -29,8 +30,9 @@ STEP_HZ = (RoomParams().gait.min_step_frequency_hz, RoomParams().gait.max_step_f
 
 @pytest.fixture(scope="module")
 def walk_and_imu():
-    """Five people for 60 s (the paper's 5 subjects), with their waist IMUs, in memory."""
-    params = RoomParams()
+    """Five people for 60 s (the paper's 5 subjects, all in view as in its Fig. 2 recording), with their
+    waist IMUs, in memory."""
+    params = params_with_overrides({"away.leaver_share": "0"})
     motion = simulate_walk(5, 60.0, params, np.random.SeedSequence(1))
     imus = [waist_imu(p.person_id, motion.bodies[i], motion.time_s, params.sensors, params.link,
                       np.random.default_rng(i)) for i, p in enumerate(motion.persons)]
@@ -70,7 +72,7 @@ def test_camera_does_not_change_motion_or_imu(tmp_path: Path):
 
 @pytest.mark.parametrize("people", [3, 10])
 def test_people_stay_in_the_room_and_keep_apart(people: int):
-    params = RoomParams()
+    params = params_with_overrides({"away.leaver_share": "0"})  # nobody leaves (test_leavers_... below)
     motion = simulate_walk(people, 40.0, params, np.random.SeedSequence(people))
     length, width = room_size(people, params.room)
     assert motion.room_m == (length, width)
@@ -82,6 +84,40 @@ def test_people_stay_in_the_room_and_keep_apart(people: int):
     gaps[:, np.arange(people), np.arange(people)] = np.inf
     assert gaps.min() > 2.0 * params.crowd.body_radius_m - 0.08  # body radii, less the sway
     assert gaps.min() < 0.8  # but they do pass close: that is what makes identification hard
+
+
+def test_leavers_go_out_of_view_once_for_the_papers_shares_and_come_back():
+    """The paper's B and C left the sensing area once, for 58 s and 180 s of 297 s; A never did."""
+    params = RoomParams()
+    assert away_shares(3, params.away) == pytest.approx([58 / 297, 180 / 297], abs=0.002)
+    duration = 120.0
+    motion = simulate_walk(3, duration, params, np.random.SeedSequence(4))
+    length, width = motion.room_m
+    out_s, away_s = [], []
+    for index, body in enumerate(motion.bodies):
+        x, y = body.head_xy_m[:, 0], body.head_xy_m[:, 1]
+        out = (x < 0) | (x > length) | (y < 0) | (y > width)
+        away = motion.plan.activity[:, index] == Activity.AWAY
+        assert not (away & ~out).any()  # while away, out of the cameras' view
+        if out.any():
+            assert np.count_nonzero(np.diff(out.astype(int)) == 1) == 1  # one exit ...
+            assert not out[-1] and not out[0]  # ... and back before the end
+        out_s.append(out.sum() / params.sensors.rate_hz)
+        away_s.append(away.sum() / params.sensors.rate_hz)
+    assert sorted(s > 0 for s in out_s) == [False, True, True]
+    waits = sorted(s for s in away_s if s > 0)  # the absences themselves, exactly the shares
+    assert waits == pytest.approx([share * duration for share in away_shares(3, params.away)], abs=0.1)
+    shares = sorted(s / duration for s in out_s if s > 0)  # out of view: the walks out and back added
+    assert shares[0] == pytest.approx(58 / 297, abs=0.12) and shares[1] == pytest.approx(180 / 297, abs=0.12)
+
+
+def test_default_session_is_the_papers_recording():
+    import inspect
+
+    assert inspect.signature(simulate_room).parameters["duration_s"].default == 297.0  # Table 2
+    params = RoomParams()
+    assert (params.room.length_m, params.room.width_m, params.room.chairs) == (5.6, 3.0, 2)
+    assert round(params.away.leaver_share * 3) == 2  # B and C leave, A does not
 
 
 def test_room_keeps_the_papers_area_per_wearer():
@@ -229,6 +265,8 @@ def test_session_reads_back_with_truth_imu_and_camera(session_file):
     assert {"p01", "p02", "p03"} <= labels and any(name.startswith("extra") for name in labels)
     assert summary.camera is not None and summary.camera["frames"] == len(camera.frame_ns)
     assert "3 people with waist sensors + 2 without" in str(summary)
+    away = session.source["truth"]["away"]  # two of three leave once (the paper's B and C)
+    assert len(away) == 2 and all(0.0 < start < end <= 20.0 for start, end in away.values())
 
 
 def test_calibration_reads_the_same_relation_from_the_file(session_file):

@@ -7,7 +7,9 @@ target inside the room and a cruise speed; the commanded velocity slows for the 
 radii) and changes at most `people.accel_mps2`. Heading follows the travel direction for forward
 walks (a walker turns before setting off), stays for backward and sideways walks, and is turned with
 a smooth, rate-limited controller. Sitting: walk to the spot in front of a free chair, turn to face
-away from it, sit down (the pelvis moves back onto the seat), sit, rise.
+away from it, sit down (the pelvis moves back onto the seat), sit, rise. Leaving (the paper's
+subjects B and C): a chosen wearer, when their time comes, walks out through the nearest wall,
+waits out of the cameras' view for their absence and walks back in (`away.*`).
 
 The loop runs at the IMU rate over all people at once; choices are made only when an activity ends.
 The pelvis path is then low-pass filtered (zero phase) so its acceleration is that of a body, not of
@@ -23,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from sim_devices.room.params import RoomParams, chair_count, room_size
+from sim_devices.room.params import RoomParams, away_shares, chair_count, room_size
 from sim_devices.room.person import Person
 
 CONTROL_HZ = 25.0  # controller rate; the path is interpolated to the IMU rate and low-passed
@@ -44,6 +46,7 @@ class Activity(enum.IntEnum):
     SIT_DOWN = 5
     SEATED = 6
     STAND_UP = 7
+    AWAY = 8  # outside the sensing area (the cameras' view), waiting to come back
 
 
 WALKS = (Activity.WALK_FORWARD, Activity.WALK_BACKWARD, Activity.WALK_SIDEWAYS)
@@ -110,6 +113,9 @@ class _State:
         self.chair = np.full(count, -1)  # chair reserved or used
         self.from_xy = start_xy.copy()  # transitions: start point
         self.begun_s = np.zeros(count)  # when the current activity started
+        self.leave_s = np.full(count, np.inf)  # when a leaver next heads out of the sensing area
+        self.absence_s = np.zeros(count)  # how long they stay out of view
+        self.outside = np.zeros(count, dtype=bool)  # may be beyond the walls (leaving, away, coming back)
 
 
 def plan_paths(persons: list[Person], duration_s: float, params: RoomParams, rng: np.random.Generator) -> Plan:
@@ -125,12 +131,16 @@ def plan_paths(persons: list[Person], duration_s: float, params: RoomParams, rng
     state = _State(persons, _start_positions(len(persons), (length, width), params, rng),
                    rng.uniform(-math.pi, math.pi, len(persons)))
     state.end_s[:] = rng.uniform(0.5, 2.0, len(persons))  # everyone stands a moment first, then starts
+    _schedule_absences(state, duration_s, params, rng)
     x, y = np.empty((steps, len(persons))), np.empty((steps, len(persons)))
     heading, activity = np.empty((steps, len(persons))), np.empty((steps, len(persons)), dtype=np.int8)
+    free = np.empty((steps, len(persons)), dtype=bool)  # allowed beyond the walls at this step
     spans: list[tuple[int, float, float, bool]] = []  # (person, start s, end s, down)
     bounds = (margin, length - margin, margin, width - margin)
     for step in range(steps):
         now = step * dt
+        due = (now >= state.leave_s) & np.isin(state.activity, (Activity.STAND, Activity.SEATED))
+        state.end_s[due] = np.minimum(state.end_s[due], now)  # time to leave: stop standing, get up
         for person in np.flatnonzero(_finished(state, now)).tolist():
             previous = Activity(int(state.activity[person]))
             if previous in (Activity.SIT_DOWN, Activity.STAND_UP):
@@ -139,6 +149,7 @@ def plan_paths(persons: list[Person], duration_s: float, params: RoomParams, rng
         _move(state, now, dt, bounds, params)
         x[step], y[step] = state.pos[:, 0], state.pos[:, 1]
         heading[step], activity[step] = state.heading, state.activity
+        free[step] = state.outside
     for person in np.flatnonzero(np.isin(state.activity, (Activity.SIT_DOWN, Activity.STAND_UP))).tolist():
         # still running at the end: its planned end lies past the last sample
         spans.append((person, float(state.begun_s[person]), float(state.end_s[person]),
@@ -148,13 +159,39 @@ def plan_paths(persons: list[Person], duration_s: float, params: RoomParams, rng
     columns = range(len(persons))
     x, y, heading = (np.stack([np.interp(time_s, control_s, values[:, i]) for i in columns], axis=1)
                      for values in (x, y, heading))
-    activity = activity[np.minimum(np.floor(time_s * control_hz + 1e-9).astype(np.int64), steps - 1)]
+    nearest = np.minimum(np.floor(time_s * control_hz + 1e-9).astype(np.int64), steps - 1)
+    activity, free = activity[nearest], free[nearest]
     transitions = [Transition(person, int(round(start * rate)), int(round(end * rate)), down)
                    for person, start, end, down in spans]
     x, y = _smooth(x, rate), _smooth(y, rate)
-    return Plan(time_s, np.clip(x, margin - 0.05, length - margin + 0.05),
-                np.clip(y, margin - 0.05, width - margin + 0.05), _smooth(heading, rate), activity, transitions,
-                chairs, (length, width))
+    x = np.where(free, x, np.clip(x, margin - 0.05, length - margin + 0.05))
+    y = np.where(free, y, np.clip(y, margin - 0.05, width - margin + 0.05))
+    return Plan(time_s, x, y, _smooth(heading, rate), activity, transitions, chairs, (length, width))
+
+
+def _schedule_absences(state: _State, duration_s: float, params: RoomParams, rng: np.random.Generator) -> None:
+    """Pick the wearers who leave the sensing area once (away.leaver_share), each absence's length
+    (away_shares: the paper's 58 s and 180 s of 297 s for 3 wearers) and when it starts (uniform, with
+    5 % of the session free before, 10 % after). A leaver heads out when their current activity ends (after
+    rising, if seated) and stays away for the whole absence, beyond `away.beyond_m` past the nearest wall."""
+    shares = away_shares(len(state.pos), params.away)
+    if not shares:
+        return
+    leavers = rng.permutation(len(state.pos))[:len(shares)]
+    for person, share in zip(leavers.tolist(), shares):
+        absence = share * duration_s
+        latest = max(0.05 * duration_s, duration_s - absence - 0.1 * duration_s)
+        state.leave_s[person] = rng.uniform(0.05 * duration_s, latest)
+        state.absence_s[person] = absence
+
+
+def _exit_point(pos: np.ndarray, room_m: tuple[float, float], beyond_m: float) -> np.ndarray:
+    """Straight out through the nearest wall, `beyond_m` past it."""
+    x, y = float(pos[0]), float(pos[1])
+    length, width = room_m
+    options = [(x, (-beyond_m, y)), (length - x, (length + beyond_m, y)), (y, (x, -beyond_m)),
+               (width - y, (x, width + beyond_m))]
+    return np.array(min(options, key=lambda option: option[0])[1])
 
 
 def _smooth(values: np.ndarray, rate: float) -> np.ndarray:
@@ -181,7 +218,8 @@ def _start_positions(count: int, room_m: tuple[float, float], params: RoomParams
 
 def _finished(state: _State, now: float) -> np.ndarray:
     act = state.activity
-    timed = np.isin(act, (Activity.STAND, Activity.SEATED, Activity.SIT_DOWN, Activity.STAND_UP)) & (now >= state.end_s)
+    timed = np.isin(act, (Activity.STAND, Activity.SEATED, Activity.SIT_DOWN, Activity.STAND_UP, Activity.AWAY)) \
+        & (now >= state.end_s)
     walking = np.isin(act, WALKS)
     arrived = (np.hypot(*(state.target - state.pos).T) < ARRIVE_M) & (np.hypot(*state.vel.T) < STOPPED_MPS)
     gave_up = walking & (now >= state.end_s)
@@ -197,10 +235,26 @@ def _next_activity(person: int, state: _State, now: float, traits: Person, chair
     if previous is Activity.STAND_UP:
         owner[state.chair[person]] = -1
         state.chair[person] = -1
-    if previous in WALKS and state.pending[person] and np.hypot(*(state.target[person] - state.pos[person])) > 0.3:
+    far = np.hypot(*(state.target[person] - state.pos[person])) > 0.3
+    leaving = bool(state.pending[person]) and state.pending[person][0][0] is Activity.AWAY
+    if previous in WALKS and state.pending[person] and far and not leaving:
         _release(person, state, owner)  # blocked on the way to a chair: give it up
+    if state.outside[person] and previous in WALKS and not leaving and not far:
+        state.outside[person] = False  # back inside the area
     activity = params.activity
-    if state.pending[person]:
+    if previous in WALKS and leaving and far:
+        kind, argument = Activity.WALK_FORWARD, -1.0  # blocked on the way out: carry on
+    elif previous is Activity.AWAY:
+        kind, argument = Activity.WALK_FORWARD, float("nan")  # back in, to a random point
+    elif not state.pending[person] and previous not in (Activity.SIT_DOWN, Activity.SEATED) \
+            and now >= state.leave_s[person]:
+        state.leave_s[person] = np.inf
+        state.outside[person] = True
+        room_m = (bounds[0] + bounds[1], bounds[2] + bounds[3])  # the walls: the bounds grown by the margin
+        state.target[person] = _exit_point(state.pos[person], room_m, params.away.beyond_m)
+        state.pending[person] = [(Activity.AWAY, 0.0)]
+        kind, argument = Activity.WALK_FORWARD, -1.0
+    elif state.pending[person]:
         kind, argument = state.pending[person].pop(0)
     elif previous is Activity.SIT_DOWN:
         kind, argument = Activity.SEATED, 0.0
@@ -276,6 +330,8 @@ def _start(person: int, kind: Activity, argument: float, state: _State, now: flo
         state.end_s[person] = now + rng.uniform(activity.transition_min_s, activity.transition_max_s)
     elif kind is Activity.SEATED:
         state.end_s[person] = now + rng.uniform(activity.sit_min_s, activity.sit_max_s)
+    elif kind is Activity.AWAY:
+        state.end_s[person] = now + float(state.absence_s[person])
     if kind in WALKS:
         distance = float(np.hypot(*(state.target[person] - pos)))
         state.end_s[person] = now + distance / max(state.cruise[person], 0.1) + 3.0 + activity.give_up_s
@@ -335,8 +391,9 @@ def _move(state: _State, now: float, dt: float, bounds: tuple[float, float, floa
     state.pos = state.pos + state.vel * dt
     _scripted(state, now)
     _separate(state, params)
-    state.pos[:, 0] = np.clip(state.pos[:, 0], bounds[0], bounds[1])
-    state.pos[:, 1] = np.clip(state.pos[:, 1], bounds[2], bounds[3])
+    inside = ~state.outside
+    state.pos[inside, 0] = np.clip(state.pos[inside, 0], bounds[0], bounds[1])
+    state.pos[inside, 1] = np.clip(state.pos[inside, 1], bounds[2], bounds[3])
 
 
 def _scripted(state: _State, now: float) -> None:

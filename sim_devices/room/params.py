@@ -215,6 +215,20 @@ class ExtraParams:
 
 
 @dataclass(frozen=True)
+class AwayParams:
+    """Wearers who leave the sensing area once and come back (the paper's subjects B and C, Table 2)."""
+
+    leaver_share: float = _p(0.67, "1", 0.0, 1.0, "wearers who leave the sensing area once = round(this x wearers): "
+                             "2 of the paper's 3 (B and C left it once, A never; Table 2, sec. 5.1)")
+    min_share: float = _p(0.195, "1", 0.0, 0.9, "shortest absence, as a share of the session: B was outside 58 s "
+                          "of 297 s (Table 2); the leavers' absences are spread evenly from min_share to "
+                          "max_share (one leaver: their mean)")
+    max_share: float = _p(0.606, "1", 0.0, 0.9, "longest absence: C was outside 180 s of 297 s (Table 2)")
+    beyond_m: float = _p(1.0, "m", 0.3, 10.0, "how far outside the sensing area's edge a leaver waits (out of "
+                         "the cameras' view; the paper's area lies inside a larger room); assumption")
+
+
+@dataclass(frozen=True)
 class RoomParams:
     """All room-simulator figures; the dotted key of a field is `<group>.<field>`."""
 
@@ -226,6 +240,7 @@ class RoomParams:
     sensors: SensorParams = field(default_factory=SensorParams)
     link: LinkParams = field(default_factory=LinkParams)
     extra: ExtraParams = field(default_factory=ExtraParams)
+    away: AwayParams = field(default_factory=AwayParams)
 
 
 def room_size(people: int, room: RoomGeometry) -> tuple[float, float]:
@@ -239,6 +254,18 @@ def room_size(people: int, room: RoomGeometry) -> tuple[float, float]:
 def chair_count(people: int, room: RoomGeometry) -> int:
     """Chairs in the room: the paper's two, scaled with the room's area."""
     return int(round(room.chairs * max(people, room.reference_people) / room.reference_people))
+
+
+def away_shares(people: int, away: AwayParams) -> list[float]:
+    """Absence of each wearer who leaves, as a share of the session (round(leaver_share x people) of
+    them), spread evenly from min_share to max_share: 58/297 and 180/297 for the paper's 3 wearers."""
+    count = min(people, int(round(away.leaver_share * people)))
+    if count == 0:
+        return []
+    if count == 1:
+        return [0.5 * (away.min_share + away.max_share)]
+    step = (away.max_share - away.min_share) / (count - 1)
+    return [away.min_share + k * step for k in range(count)]
 
 
 def extra_count(people: int, extra: ExtraParams) -> int:
@@ -280,6 +307,9 @@ def params_with_overrides(overrides: dict[str, str], base: RoomParams | None = N
 def check(params: RoomParams) -> None:
     """ConfigError when a [min, max] pair is reversed, no activity has weight, or a batch spans > 4 s."""
     check_pairs_and_batches(params)
+    if params.away.min_share > params.away.max_share:
+        raise ConfigError(f"--set: away.min_share = {params.away.min_share} exceeds away.max_share = "
+                          f"{params.away.max_share}")
     weights = [getattr(params.activity, f.name) for f in dataclasses.fields(params.activity) if f.name.endswith("_weight")]
     if sum(weights) <= 0:
         raise ConfigError("--set: activity.*_weight are all zero (nobody would do anything)")

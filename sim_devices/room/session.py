@@ -41,6 +41,7 @@ CAMERA_ID = "cam1"
 TRUTH_HZ = 50.0
 MAX_PEOPLE = 99  # ids p01..p99
 MAX_DURATION_S = 4 * 3600.0
+PAPER_DURATION_S = 297.0  # the paper's recording (Table 2)
 MOTION_SHARE, CAMERA_SHARE = 0.4, 0.1  # progress bar: motion, camera, then sensors and writing
 
 
@@ -79,7 +80,7 @@ class RoomSummary:
         return "\n".join(lines)
 
 
-def simulate_room(output: Path, seed: int = 1, people: int = 3, duration_s: float = 120.0,
+def simulate_room(output: Path, seed: int = 1, people: int = 3, duration_s: float = PAPER_DURATION_S,
                   params: RoomParams | None = None, camera: bool = True,
                   progress: Callable[[float], None] | None = None, *,
                   tracker: TrackerParams | None = None) -> RoomSummary:
@@ -186,11 +187,23 @@ def _describe(motion: Motion, imus: list[WaistImu], extras: list[PersonPath], pa
         "duration_s": float(duration_s), "preset": PRESET if tracker is not None else None,
         "camera": tracker is not None, "room_m": [length, width], "params": dataclasses.asdict(params),
         "truth": {"people": {p.person_id: p.to_dict() for p in motion.persons}, "devices": devices,
-                  "chairs": [dataclasses.asdict(c) for c in motion.plan.chairs],
+                  "chairs": [dataclasses.asdict(c) for c in motion.plan.chairs], "away": _away_spans(motion),
                   "extras": {e.person_id: {"height_m": e.height_m} for e in extras}}}
     if tracker is not None:
         source["tracker"] = {"camera_id": CAMERA_ID, "params": dataclasses.asdict(tracker)}
     return Session(Venue(VENUE, length, width), tuple(agents), source)
+
+
+def _away_spans(motion: Motion) -> dict[str, list[float]]:
+    """Each leaver's [start, end] s of waiting outside the sensing area (the walks out and back not included)."""
+    from sim_devices.room.activities import Activity
+
+    spans = {}
+    for index, person in enumerate(motion.persons):
+        away = np.flatnonzero(motion.plan.activity[:, index] == Activity.AWAY)
+        if away.size:
+            spans[person.person_id] = [float(motion.time_s[away[0]]), float(motion.time_s[away[-1]])]
+    return spans
 
 
 def _imu_items(imu: WaistImu, motion: Motion, params: RoomParams, rng: np.random.Generator,
