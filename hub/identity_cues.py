@@ -213,6 +213,18 @@ class TrackCues:
                 velocity = tc @ (xy[recent] - xy[recent].mean(axis=0)) / denominator
         self.ring.put(int(time_ns // BIN_NS), x=x_m, y=y_m, vx=float(velocity[0]), vy=float(velocity[1]))
 
+    def at(self, time_ns: int) -> tuple[int, np.ndarray] | None:
+        """(time, position) of the newest frame not after `time_ns` among those kept (about 1 s), or None."""
+        n = min(self.count, len(self.times))
+        if n == 0:
+            return None
+        stamps = np.round(self.times[:n] * 1e9).astype(np.int64)
+        kept = np.flatnonzero(stamps <= time_ns)
+        if not len(kept):
+            return None
+        k = kept[np.argmax(stamps[kept])]
+        return int(stamps[k]), self.xy[k].copy()
+
     def speed(self, first_bin: int, count: int) -> np.ndarray:
         return np.hypot(self.ring.window("vx", first_bin, count), self.ring.window("vy", first_bin, count))
 

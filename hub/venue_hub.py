@@ -68,4 +68,5 @@ class VenueHub:
         pose = view.pose_at(time_ns) if view is not None else None
         if pose is None:
             return None
-        return pose[0], float(np.sqrt(max(np.linalg.eigvalsh(pose[1]).max(), 0.0)))
+        honest = pose[1] + view.extra  # the edge's covariance and what it is missing (hub/chair_hub.py)
+        return pose[0], float(np.sqrt(max(np.linalg.eigvalsh(honest).max(), 0.0)))

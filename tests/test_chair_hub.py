@@ -160,3 +160,53 @@ def test_clock_offset_is_the_lower_envelope_of_arrival_minus_sample_time():
         clocks.observe("s", sample, sample + offset + int((0.02 + rng.exponential(0.01)) * S))
     assert abs(clocks.offset_ns("s") - (offset + 0.02 * S)) < 0.002 * S
     assert clocks.offset_ns("unknown") == 0
+
+
+def video_fix(agent: str, t: int, x: float, y: float, sd: float = 0.085, source: str = "cam1:7"):
+    return messages.new("PositionFix", timestamp_ns=t, agent_id=agent, kind=Kind.VIDEO, x_m=x, y_m=y,
+                        covariance=[sd * sd, 0.0, 0.0, sd * sd], source_id=source)
+
+
+def test_the_covariance_the_edge_is_missing_grows_with_travel_and_time_and_shrinks_with_a_fix():
+    settings = HubSettings(corrections=frozenset({"camera"}), extra_m2_per_m=0.003, extra_m2_per_s=0.0005)
+    hub = ChairHub(venue(1), settings)
+    for k in range(101):  # 2 s, 5 m along x: 0.003 x 5 + 0.0005 x 2 = 0.016 m^2 per axis
+        send(hub, pose("c0", int(k * 0.02 * S), 2.5 * k * 0.02, 0.0, sd=0.05))
+    extra = hub.agents["c0"].extra
+    assert extra[0, 0] == pytest.approx(0.016, rel=1e-3) and extra[0, 1] == 0.0
+    published = send(hub, pose("c0", int(2.02 * S), 5.05, 0.0, sd=0.05))[0]
+    assert np.sqrt(published.covariance[0]) == pytest.approx(np.hypot(0.05, np.sqrt(extra[0, 0])), rel=1e-2)
+    send(hub, video_fix("c0", int(2.0 * S), 5.0, 0.0))
+    send(hub, pose("c0", int(2.04 * S), 5.1, 0.0, sd=0.05))
+    assert 0.0 < hub.agents["c0"].extra[0, 0] < 0.016  # the honest posterior holds less beyond the edge's
+
+
+def test_a_pose_off_by_a_metre_with_a_small_sd_is_repaired_by_a_consistent_video_track():
+    """The edge says 5 cm but sits 1 m off (a wrong fix taken, a shove): the gate refuses the right
+    track's fixes, until `relock_after` of them in a row agree on the offset."""
+    settings = HubSettings(corrections=frozenset({"camera"}), extra_m2_per_m=0.0, extra_m2_per_s=0.0)
+    hub = ChairHub(venue(1), settings)
+    taken = []
+    for k in range(300):  # 6 s standing, the edge at x = 10, the camera's track at x = 11
+        t = int(k * 0.02 * S)
+        sequence = hub.agents["c0"].sequence  # an edge that takes every correction at once
+        send(hub, pose("c0", t, 10.0, 5.0, sd=0.05, sequence=sequence))
+        if k % 50 == 10:
+            taken += corrections(send(hub, video_fix("c0", t, 11.0 + 0.02 * (k % 3), 5.0)))
+    assert hub.counters.gated_out == settings.relock_after - 1
+    assert hub.counters.relocks == 1 and len(taken) >= 2
+    assert taken[0].dx_m == pytest.approx(1.0, abs=0.05)
+    assert hub.agents["c0"].extra[0, 0] > 0.0  # the offset became uncertainty: later fixes pass the gate
+
+
+def test_fixes_from_different_tracks_or_with_scattered_offsets_do_not_relock():
+    settings = HubSettings(corrections=frozenset({"camera"}), extra_m2_per_m=0.0, extra_m2_per_s=0.0)
+    for sources, offsets in ((("cam1:1", "cam1:2", "cam1:1", "cam1:2"), (1.0, 1.0, 1.0, 1.0)),
+                             (("cam1:1",) * 4, (1.0, -1.0, 1.0, -1.0))):
+        hub = ChairHub(venue(1), settings)
+        for k in range(200):
+            t = int(k * 0.02 * S)
+            send(hub, pose("c0", t, 10.0, 5.0, sd=0.05))
+            if k % 50 == 10:
+                send(hub, video_fix("c0", t, 10.0 + offsets[k // 50], 5.0, source=sources[k // 50]))
+        assert hub.counters.relocks == 0 and hub.counters.gated_out == 4

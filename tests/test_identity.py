@@ -244,3 +244,50 @@ def test_the_block_reads_equal_the_signal_by_signal_cues():
         np.testing.assert_allclose(block["yaw_dr"][row],
                                    turn_rate(lambda b, n: ring.window("heading_dr", b, n), start, count))
     assert BIN_NS == 100_000_000
+
+
+def test_chairs_are_named_in_the_first_frame_of_play_where_they_start():
+    """Before any edge pose has reached the hub, a chair is where its edge starts it (the session's start):
+    a new track there, with no other chair expected near, is that chair's at once (births); two chairs
+    starting side by side are left to the evidence."""
+    from dataclasses import replace
+
+    starts = {"a": (1.0, 1.0), "b": (4.0, 1.0), "c": (2.5, 2.5), "d": (2.9, 2.5)}  # c and d 0.4 m apart
+    paths = {p: waypoints_path([(0, x, y), (3, x, y), (8, x + 0.5, y - 0.3), (12, x + 0.5, y - 0.3)])
+             for p, (x, y) in starts.items()}
+    tracks = [(k + 1, p, 0, 12) for k, p in enumerate(starts)]
+    base = session(list(starts), chairs=True)
+    chairs = replace(base, agents=tuple(replace(a, start_x_m=starts[a.id][0], start_y_m=starts[a.id][1])
+                                        for a in base.agents))
+    hub = pose_from_paths(paths)
+
+    def pose_of(agent: str, time_ns: int):  # the edges' first poses reach the hub after 1 s
+        return hub(agent, time_ns) if time_ns >= 1 * S else None
+
+    rng = np.random.default_rng(1)
+    events = [e for p, (t, xy) in paths.items() for e in imu_batches(p, t, xy, rng, chairs=True)]
+    events += camera_frames(paths, tracks, rng, end_s=12)
+    events.sort(key=lambda e: e[0])
+    engine = IdentityEngine(chairs, IdentitySettings(), pose_of=pose_of)
+    changes = [(o.timestamp_ns / S, o.agent_id, o.track_id) for _, m in events for o in engine.on_message(m)
+               if o.DESCRIPTOR.name == "TrackIdentity"]
+    assert (holder_at(changes, "a", 0.1), holder_at(changes, "b", 0.1)) == (1, 2)
+    assert holder_at(changes, "c", 0.1) == 0 and holder_at(changes, "d", 0.1) == 0
+    assert engine.counters.births == 2
+    assert all(track == 0 or tracks[track - 1][1] == who for _, who, track in changes)  # never a wrong one
+
+
+def test_a_fix_is_where_the_track_was_at_the_newest_scored_bin_not_its_newest_frame():
+    """A tracker's swap in the last delay_s is not yet in the evidence: a fix from there could be someone else's."""
+    rng = np.random.default_rng(1)
+    events = [e for p, (t, xy) in CROSSING.items() for e in imu_batches(p, t, xy, rng)]
+    events += camera_frames(CROSSING, [(1, "a", 0, 30), (2, "b", 0, 30), (3, "c", 0, 30)], rng, end_s=30)
+    events.sort(key=lambda e: e[0])
+    settings = IdentitySettings()
+    engine = IdentityEngine(session(list(CROSSING)), settings, pose_of=pose_from_paths(CROSSING))
+    lags = []
+    for _, message in events:
+        for out in engine.on_message(message):
+            if out.DESCRIPTOR.name == "PositionFix":
+                lags.append((message.timestamp_ns - out.timestamp_ns) / S)
+    assert lags and min(lags) >= settings.delay_s - 0.1 and max(lags) <= settings.delay_s + settings.hop_s + 0.1

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from identity_scenes import write_scene
 from protocol.session_log import read_session
 from reckon.evaluation.identity_eval import evaluate_identity, to_json, to_table
@@ -26,8 +28,10 @@ def test_identity_table_scores_both_methods_from_a_session_log(tmp_path: Path):
         assert row["agents"] == 3
         assert 0.0 <= row["time_correct_pct"] <= 100.0 and 0.0 <= row["idf1"] <= 1.0
         assert row["update_ms_p99"] > 0
+        # every visible frame not correct has one cause
+        assert sum(row["lost_pct"].values()) + row["time_correct_pct"] == pytest.approx(100.0, abs=0.05)
     # the live identity starts late (evidence first) and back-filling can only add correct time
     assert live["time_correct_pct"] < refined["time_correct_pct"]
     assert refined["time_correct_pct"] >= 95.0
     assert paper["note"].startswith("6 of 6 permutations")
-    assert "time correct" in to_table(report)
+    assert "time correct" in to_table(report) and "lost: wrong track" in to_table(report)

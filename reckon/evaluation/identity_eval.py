@@ -49,6 +49,12 @@ class IdentityRow:
     update_ms_p99: float | None
     note: str = ""
     per_agent_pct: dict[str, float] = field(default_factory=dict)
+    lost_pct: dict[str, float] = field(default_factory=dict)  # share of visible agent-frames lost, by cause (LOSSES)
+
+
+LOSSES = ("wrong track", "no track: its track in its first 1.5 s", "no track: its track a merge",
+          "no track: its track held by another", "no track: its track free")
+YOUNG_TRACK_S = 1.5
 
 
 @dataclass
@@ -227,6 +233,7 @@ def _score(method: str, data: SessionData, agents: list[str], assignment: dict[s
 
     correct = {a: 0 for a in agents}
     visible = {a: 0 for a in agents}
+    lost = dict.fromkeys(LOSSES, 0)
     accumulator = motmetrics.MOTAccumulator(auto_id=True)
     number = {a: k + 1 for k, a in enumerate(agents)}
     for camera, tracks in data.cameras.items():
@@ -237,16 +244,22 @@ def _score(method: str, data: SessionData, agents: list[str], assignment: dict[s
         starts = np.searchsorted(frame_of_row, np.arange(len(tracks.frame_ns)))
         ends = np.searchsorted(frame_of_row, np.arange(len(tracks.frame_ns)), side="right")
         truth_xy = {a: _truth_at(data, a, tracks.frame_ns) for a in agents}
+        ids, first_row = np.unique(tracks.track_id, return_index=True)
+        born_ns = dict(zip(ids.tolist(), tracks.time_ns[first_row].tolist()))
         for f in range(len(tracks.frame_ns)):
             rows = range(starts[f], ends[f])
             shown = {a: {int(tracks.track_id[r]) for r in rows if a in str(tracks.person_id[r]).split("+")} for a in agents}
             where = {int(tracks.track_id[r]): (tracks.x_m[r], tracks.y_m[r]) for r in rows}
+            merged = {int(tracks.track_id[r]) for r in rows if "+" in str(tracks.person_id[r])}
+            holding = {int(held[a][f]) for a in agents if a in held and len(held[a]) > f} - {0}
             gt, hyp, hyp_xy = [], [], []
             for a in agents:
                 track = int(held.get(a, np.zeros(0))[f]) if a in held and len(held[a]) > f else 0
                 if shown[a]:
                     visible[a] += 1
                     correct[a] += track in shown[a]
+                    if track not in shown[a]:
+                        lost[_cause(track, shown[a], merged, holding, born_ns, int(tracks.frame_ns[f]))] += 1
                     gt.append(a)
                 if track in where:
                     hyp.append(a)
@@ -262,7 +275,18 @@ def _score(method: str, data: SessionData, agents: list[str], assignment: dict[s
         summary = motmetrics.metrics.create().compute(accumulator, metrics=["idf1"], name=method)
         idf1 = float(summary["idf1"].iloc[0])
     return IdentityRow(method, len(agents), 100.0 * sum(correct.values()) / seen if seen else None, idf1, None,
-                       per_agent_pct=per_agent)
+                       per_agent_pct=per_agent, lost_pct={k: 100.0 * n / seen for k, n in lost.items()} if seen else {})
+
+
+def _cause(track: int, shown: set[int], merged: set[int], holding: set[int], born_ns: dict, frame_ns: int) -> str:
+    """Why an agent visible on `shown` was not correctly identified at this frame (one of LOSSES)."""
+    if track:
+        return LOSSES[0]
+    if min(frame_ns - born_ns[t] for t in shown) < YOUNG_TRACK_S * 1e9:
+        return LOSSES[1]
+    if shown & merged:
+        return LOSSES[2]
+    return LOSSES[3] if shown & holding else LOSSES[4]
 
 
 def _truth_at(data: SessionData, agent_id: str, frame_ns: np.ndarray) -> np.ndarray:
@@ -282,7 +306,8 @@ def _r(value: float | None, digits: int = 2) -> float | None:
 def to_json(report: IdentityReport) -> list[dict[str, Any]]:
     return [{"method": row.method, "agents": row.agents, "time_correct_pct": _r(row.time_correct_pct),
              "idf1": _r(row.idf1, 4), "update_ms_p99": _r(row.update_ms_p99, 3), "note": row.note,
-             "per_agent_pct": {a: _r(v) for a, v in row.per_agent_pct.items()}} for row in report.rows]
+             "per_agent_pct": {a: _r(v) for a, v in row.per_agent_pct.items()},
+             "lost_pct": {k: _r(v) for k, v in row.lost_pct.items()}} for row in report.rows]
 
 
 def to_table(report: IdentityReport) -> str:
@@ -293,6 +318,8 @@ def to_table(report: IdentityReport) -> str:
         idf1 = "-" if row.idf1 is None else f"{row.idf1:.3f}"
         ms = "-" if row.update_ms_p99 is None else f"{row.update_ms_p99:.3g}"
         lines.append(f"{row.method:8} {row.agents:>6} {pct:>15} {idf1:>6} {ms:>14}  {row.note}")
+        if row.lost_pct:
+            lines.append(" " * 9 + "lost: " + ", ".join(f"{k} {v:.1f} %" for k, v in row.lost_pct.items()))
     lines += [f"  {note}" for note in report.notes]
     return "\n".join(lines)
 
