@@ -371,6 +371,27 @@ def vm_kb(pid: int, field: str) -> int:
     return 0
 
 
+def thread_cpu_s(pid: int) -> dict[str, float]:
+    """CPU seconds (utime + stime) of a process's threads by name, numbers dropped: Zenoh's runtime
+    threads (`rx`, `tx`, `net`, `app`, `acc`) apart from Python's (`python`: the main thread and
+    any Python thread, which all keep the process's name); {} once it has exited."""
+    out: dict[str, float] = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return out
+    for task in tasks:
+        try:
+            text = Path(f"/proc/{pid}/task/{task}/stat").read_text()
+        except OSError:
+            continue
+        name = re.sub(r"-\d+$", "", text[text.index("(") + 1:text.rindex(")")])
+        fields = text[text.rindex(")") + 2:].split()
+        out[name] = out.get(name, 0.0) + (int(fields[11]) + int(fields[12])) / tick
+    return out
+
+
 def run_load(out: Path, agents: int = 500, rate_hz: float = 50.0, duration_s: float = 60.0, seed: int = 1,
              progress: Callable[[str], None] = print, record: bool = False) -> dict[str, Any]:
     """Run the hub under `agents` chairs' load for `duration_s`; the numbers (JSON-able).
@@ -451,8 +472,9 @@ def _check_running(children: dict[str, _Child], may_finish: str = "") -> None:
             raise ReckonError(f"bench load: {name} exited early with {exited.returncode}; see {child.log_path}")
 
 
-def _cpu_now(children: dict[str, _Child], now: float) -> dict[str, float]:
+def _cpu_now(children: dict[str, _Child], now: float) -> dict[str, Any]:
     return {"wall": now, "machine_busy": _system_busy_s(), "bench_process": time.process_time(),
+            "hub_threads": thread_cpu_s(children["hub"].process.pid),
             **{name: child.cpu_s() for name, child in children.items()}}
 
 
@@ -488,9 +510,18 @@ def _results(out: Path, spec: LoadSpec, hub: _Child, children: dict[str, _Child]
     cores = {name: (at_end[name] - at_start[name]) / wall_s for name in ("hub", "generator", "watcher", "bench_process")}
     cores["other_processes"] = (at_end["machine_busy"] - at_start["machine_busy"]) / wall_s - sum(cores.values())
     steady_rss = [mb for t, mb in rss_mb if warmup_s <= t <= spec.duration_s - margin_s] or [mb for _, mb in rss_mb]
+    # The inputs the hub took in the window: its live poses that reached the watcher in it, times
+    # the hub's inputs per live pose (poses plus sightings and impacts).
+    in_window = int(((received >= at_start["wall"] * 1e9) & (received < at_end["wall"] * 1e9)).sum())
+    window_inputs = in_window * summary["inputs"] / max(1, watched["live"])
+    threads = {name: (at_end["hub_threads"].get(name, 0.0) - used) / wall_s
+               for name, used in at_start["hub_threads"].items()}
+    hub_cpu_s = cores["hub"] * wall_s
     return {
         "agents": spec.agents, "rate_hz": spec.rate_hz, "duration_s": spec.duration_s,
         "hub_cpu_cores": cores["hub"],
+        # CPU per input: robust where the share of the cores is not (the machine is shared)
+        "hub_cpu_us_per_input": hub_cpu_s / window_inputs * 1e6 if window_inputs else None,
         # False: the hub's back-pressure held the generator back, so hub_cpu_cores is what the hub
         # manages on this machine (its ceiling), not what the load costs, and latency grows with the lag
         "kept_up": generated["max_behind_ms"] <= KEPT_UP_MS,
@@ -504,6 +535,9 @@ def _results(out: Path, spec: LoadSpec, hub: _Child, children: dict[str, _Child]
         "details": {
             "targets": {"hub_cpu_cores": 1.0, "latency_p99_ms": 50.0},
             "window_s": wall_s, "cpu_cores": cores,
+            "hub_threads_cpu_cores": {name: round(v, 4) for name, v in sorted(threads.items(), key=lambda kv: -kv[1])},
+            "hub_inputs_in_window": round(window_inputs),
+            "hub_cpu_us_per_input_whole_run": hub.exited.cpu_s / max(1, summary["inputs"]) * 1e6,
             "cpu_s_whole_run": {name: child.exited.cpu_s for name, child in children.items()},
             "generated": generated, "hub_expected_inputs": hub_expected, "hub": summary, "watched": watched,
             "lost_live_poses": lost_live, "poses_in_percentiles": int(both.sum()),
@@ -536,6 +570,10 @@ def format_load(result: dict[str, Any]) -> str:
         f"hub CPU                 {result['hub_cpu_cores']:6.2f} cores    target <= 1     "
         f"{verdict(result['hub_cpu_cores'] <= 1.0 and result['kept_up'])}   (over {d['window_s']:.0f} s of steady state)",
         f"  {keeping}",
+        f"  {result['hub_cpu_us_per_input'] or math.nan:.1f} µs of hub CPU per input in the window "
+        f"({d['hub_inputs_in_window'] / d['window_s']:,.0f} inputs/s; whole run "
+        f"{d['hub_cpu_us_per_input_whole_run']:.1f} µs); threads "
+        + ", ".join(f"{name} {v:.2f}" for name, v in d['hub_threads_cpu_cores'].items() if v >= 0.005) + " cores",
         f"  generator {cores['generator']:.2f}, watcher {cores['watcher']:.2f}, this process "
         f"{cores['bench_process']:.2f}, other processes {cores['other_processes']:.2f} cores (same 2 cores)",
         f"latency p50 / p99 / max {lat['p50']:6.1f} / {lat['p99']:.1f} / {lat['max']:.1f} ms   target p99 <= 50 ms  "

@@ -12,7 +12,8 @@ bytes. Rules it follows (field-notes.md, Zenoh section):
 - Measurements are never dropped: publishers use CongestionControl.BLOCK and a `Subscription`
   moves samples from a Zenoh FIFO into a bounded `queue.Queue` on its own thread, blocking when
   the queue is full. A slow consumer therefore slows the publisher down (back-pressure) instead
-  of losing data. Limit: Zenoh closes a link whose transmit queue stays blocked for
+  of losing data. `PolledSubscription` (the hub's) has no thread: its consumer empties the Zenoh
+  FIFOs itself, in batches, and a full FIFO holds the publishers back the same way. Limit: Zenoh closes a link whose transmit queue stays blocked for
   `transport.link.tx.queue.congestion_control.block.wait_before_close` (5 s by default), so a
   consumer must not stall for seconds. Nothing here blocks inside a Zenoh callback.
 - Tests and start-up wait on ready signals (liveliness tokens, flush replies), never on sleep.
@@ -22,15 +23,17 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import queue
 import re
 import threading
 import time
+from collections import deque
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import json5
 import zenoh
@@ -183,41 +186,53 @@ def source_ns(sample: zenoh.Sample) -> int | None:
 
 
 class Publisher:
-    """Publish protocol messages on their keys: one Zenoh publisher per key, declared on first use.
+    """Publish protocol messages on their keys with `Session.put`, congestion control BLOCK: when the
+    link is full `publish` waits rather than drops.
 
-    Congestion control BLOCK: when the link is full `publish` waits rather than drops.
+    No Zenoh publisher or key expression is declared per key. Measured with eclipse-zenoh 1.10 on
+    the bench VM (docs/benchmarks.md, Load): a process holding a declared publisher or key
+    expression per key (the hub: live, refined and correction keys of 500 agents) spent about
+    50 µs of its Zenoh receive thread on every sample it received, against 3 µs with plain puts;
+    a put costs the publishing thread the same either way. Each key's `KeyExpr` is built (and
+    checked) once and kept, as is each encoding's `Encoding`.
     """
 
     def __init__(self, session: zenoh.Session):
         self._session = session
-        self._publishers: dict[str, tuple[zenoh.Publisher, str]] = {}
+        self._keys: dict[str, zenoh.KeyExpr] = {}
+        self._zenoh_encodings: dict[str, zenoh.Encoding] = {}
+        self._encodings: dict[type, str] = {}  # message class -> its encoding (wire.encode's answer)
+        self._block = zenoh.CongestionControl.BLOCK
         self.sent = 0
 
     def publish(self, key: str, message: Any) -> None:
-        payload, encoding = wire.encode(message)
+        encoding = self._encodings.get(type(message))
+        if encoding is None:
+            payload, encoding = wire.encode(message)
+            self._encodings[type(message)] = encoding
+        else:
+            payload = message.SerializeToString()
         self.publish_bytes(key, payload, encoding)
 
     def publish_bytes(self, key: str, payload: bytes, encoding: str) -> None:
         """Publish an already-encoded payload (the replayer's path: no decode and re-encode)."""
-        entry = self._publishers.get(key)
-        if entry is None:
+        key_expr = self._keys.get(key)
+        if key_expr is None:
             try:
-                publisher = self._session.declare_publisher(
-                    key, encoding=zenoh.Encoding(encoding), congestion_control=zenoh.CongestionControl.BLOCK)
+                key_expr = self._keys[key] = zenoh.KeyExpr(key)
             except zenoh.ZError as error:
                 raise BusError(f"cannot publish on key {key!r}: {error}") from None
-            entry = self._publishers[key] = (publisher, encoding)
-        publisher, declared = entry
-        if encoding == declared:
-            publisher.put(payload)
-        else:  # a key that carries two message types: say which one this is
-            publisher.put(payload, encoding=zenoh.Encoding(encoding))
+        zenoh_encoding = self._zenoh_encodings.get(encoding)
+        if zenoh_encoding is None:
+            zenoh_encoding = self._zenoh_encodings[encoding] = zenoh.Encoding(encoding)
+        try:
+            self._session.put(key_expr, payload, encoding=zenoh_encoding, congestion_control=self._block)
+        except zenoh.ZError as error:
+            raise BusError(f"cannot publish on key {key!r}: {error}") from None
         self.sent += 1
 
     def close(self) -> None:
-        for publisher, _ in self._publishers.values():
-            publisher.undeclare()
-        self._publishers.clear()
+        self._keys.clear()
 
     def __enter__(self) -> "Publisher":
         return self
@@ -230,20 +245,31 @@ class Publisher:
 # Subscribing
 
 
-@dataclass(frozen=True, slots=True)
-class Received:
-    """One sample, copied out of Zenoh: bytes and strings only."""
+class Received(NamedTuple):
+    """One sample, copied out of Zenoh: bytes and strings only. (A named tuple: built for every
+    sample the hub takes, it costs a third of a frozen dataclass.)"""
 
     key: str
     payload: bytes
     encoding: str
     delete: bool  # a DELETE sample (e.g. the end-of-session marker), not a PUT
-    received_ns: int  # this process's wall clock when the sample left Zenoh's FIFO
+    received_ns: int  # this process's wall clock when the sample left Zenoh's FIFO (polled: its sweep began)
     source_ns: int | None  # the publisher's clock at the put, when it stamps samples
 
     def decode(self) -> Any:
         """The protocol message; InputError for a foreign encoding or bad bytes."""
-        return wire.decode(self.encoding, self.payload, where=self.key)
+        cls = _DECODERS.get(self.encoding)
+        if cls is not None:
+            try:
+                return cls.FromString(self.payload)
+            except Exception:  # noqa: BLE001 - protobuf's DecodeError; wire.decode says what is wrong
+                pass
+        message = wire.decode(self.encoding, self.payload, where=self.key)
+        _DECODERS[self.encoding] = type(message)
+        return message
+
+
+_DECODERS: dict[str, Any] = {}  # encoding -> protobuf class, for encodings `wire.decode` accepted
 
 
 @dataclass
@@ -363,6 +389,176 @@ class Subscription:
             self.stats.discarded += int(item is not _END)
 
     def __enter__(self) -> "Subscription":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class PolledSubscription:
+    """Samples of `selector`, taken in batches on the consumer's own thread: no drain thread at all.
+
+    For a process whose one thread does all the work (the hub). `take` empties the selectors'
+    Zenoh FIFOs with `try_recv` (under a microsecond a sample: no lock, no thread hand-off, the GIL
+    never handed to another Python thread), CHUNK samples of one selector at a time, round-robin,
+    so no selector waits behind another for more than a few samples. Nothing is dropped: when the
+    consumer is slow the FIFOs (`fifo_capacity` samples each) fill and Zenoh pushes back on the
+    publishers, as with `Subscription`. One selector's samples come out in the order Zenoh
+    delivered them; across selectors, in the order they were taken, or with `by_source_time` in
+    the order they were published (each sweep of the FIFOs sorted by the samples' Zenoh timestamps,
+    a stable sort: one publisher's samples keep their order, and the interleaving of the streams
+    is that of their puts, not of the sweep, however the samples fell into sweeps). `received_ns`
+    is the sweep's start: one clock reading per sweep, never decreasing. Same end-of-stream rules as
+    `Subscription`: after `undeclare`, what was received before still comes out, then `take` and
+    `get` return None; `close` discards what is left (counted in `stats.discarded`).
+
+    stats.full_waits counts the times `fifo_capacity` samples or more were taken from one FIFO in a
+    row without finding it empty: it was full, so Zenoh was holding the publishers back.
+    stats.max_depth is the largest batch. When every FIFO is empty, `take` sleeps ACTIVE_PAUSE_S
+    (0.2 ms) if samples came in the last ACTIVE_FOR_S, else IDLE_PAUSE_S (1 ms): under traffic a
+    sample waits at most about 0.2 ms in its FIFO for the consumer to look (1 ms sleeps put the
+    load bench's median latency at 100 chairs from 3 to 14 ms on the loaded 2-vCPU VM), the first
+    sample after a quiet spell at most about 1 ms, an idle consumer wakes 1,000 times a second
+    (3 % of a core on that VM), and a busy one never sleeps.
+    """
+
+    CHUNK = 32
+    ACTIVE_PAUSE_S = 0.0002  # the sleep when every FIFO is empty but samples came in the last ACTIVE_FOR_S
+    ACTIVE_FOR_S = 0.5
+    IDLE_PAUSE_S = 0.001  # the sleep after a quiet ACTIVE_FOR_S (5 ms made tests/test_bench.py's start-up fail one run in two)
+    CLOSE_TIMEOUT_S = 5.0  # after undeclare, how long a FIFO may stay open but empty
+
+    def __init__(self, session: zenoh.Session, selector: str | Sequence[str], fifo_capacity: int = QUEUE_CAPACITY,
+                 by_source_time: bool = False):
+        selectors = [selector] if isinstance(selector, str) else list(selector)
+        self._by_source_time = by_source_time
+        if fifo_capacity < 1 or not selectors:
+            raise ConfigError(f"subscription {selector!r}: fifo_capacity {fifo_capacity} must be at least 1, "
+                              "and a selector is needed")
+        self.selector = ", ".join(selectors)
+        self.stats = SubscriptionStats()
+        self._fifo_capacity = fifo_capacity
+        self._undeclared_at: float | None = None
+        self._subscribers: list[Any] = []
+        self._handlers: list[Any] = []  # taken at once: the attribute is gone after undeclare
+        self._pending: deque[Received] = deque()  # taken from the FIFOs, not yet handed out
+        self._run: dict[int, int] = {}  # per FIFO (by id): samples taken in a row without finding it empty
+        self._last_data = -math.inf  # monotonic time of the last sweep that found something
+        for one in selectors:
+            try:
+                subscriber = session.declare_subscriber(one, zenoh.handlers.FifoChannel(fifo_capacity))
+            except zenoh.ZError as error:
+                for declared in self._subscribers:
+                    declared.undeclare()
+                raise BusError(f"cannot subscribe to {one!r}: {error}") from None
+            self._subscribers.append(subscriber)
+            self._handlers.append(subscriber.handler)
+
+    def _sweep(self, limit: int) -> list[Received]:
+        """What the FIFOs hold now, up to about `limit` samples."""
+        batch: list[Received] = []
+        append, delete, now_ns = batch.append, zenoh.SampleKind.DELETE, time.time_ns()
+        chunk, capacity = self.CHUNK, self._fifo_capacity
+        active, run = list(self._handlers), self._run
+        while active and len(batch) < limit:
+            busy = []
+            for handler in active:
+                try_recv, taken = handler.try_recv, 0
+                try:
+                    while taken < chunk:
+                        sample = try_recv()
+                        if sample is None:
+                            break
+                        stamp = sample.timestamp
+                        append(Received(str(sample.key_expr), sample.payload.to_bytes(), str(sample.encoding),
+                                        sample.kind == delete, now_ns,
+                                        None if stamp is None else int(stamp.get_time_as_ntp64().as_nanos())))
+                        taken += 1
+                except zenoh.ZError:  # "channel is empty and closed": undeclared, or the session closed
+                    self._handlers.remove(handler)
+                    continue
+                key = id(handler)
+                before = run.get(key, 0)
+                if before < capacity <= before + taken:
+                    self.stats.full_waits += 1
+                if taken == chunk:
+                    run[key] = before + taken
+                    busy.append(handler)
+                else:  # found empty
+                    run[key] = 0
+            active = busy
+        self.stats.received += len(batch)
+        self.stats.max_depth = max(self.stats.max_depth, len(batch))
+        if self._by_source_time and len(batch) > 1:  # stable: one publisher's samples keep their order
+            batch.sort(key=lambda item: now_ns if item.source_ns is None else item.source_ns)
+        return batch
+
+    def take(self, limit: int = 4096, timeout: float | None = None) -> list[Received] | None:
+        """The next samples: at least one, at most `limit`, each selector's oldest first.
+
+        queue.Empty after `timeout` s with nothing (None: wait for ever); None once undeclared and
+        everything received before has been delivered.
+        """
+        if self._pending:
+            batch = [self._pending.popleft() for _ in range(min(limit, len(self._pending)))]
+            self.stats.delivered += len(batch)
+            return batch
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self._handlers:
+            batch = self._sweep(limit)
+            if batch:
+                self._last_data = time.monotonic()
+                if len(batch) > limit:  # a sweep takes CHUNK samples of a FIFO at a time: hold the excess
+                    self._pending.extend(batch[limit:])
+                    del batch[limit:]
+                self.stats.delivered += len(batch)
+                return batch
+            now = time.monotonic()
+            if self._undeclared_at is not None and now - self._undeclared_at > self.CLOSE_TIMEOUT_S:
+                log.warning("subscription %s: %d FIFO(s) still open %.0f s after undeclare; stopping", self.selector,
+                            len(self._handlers), self.CLOSE_TIMEOUT_S)
+                self._handlers.clear()
+                break
+            if deadline is not None and now >= deadline:
+                raise queue.Empty
+            pause = self.ACTIVE_PAUSE_S if now - self._last_data < self.ACTIVE_FOR_S else self.IDLE_PAUSE_S
+            time.sleep(pause if deadline is None else min(pause, deadline - now))
+        return None
+
+    def get(self, timeout: float | None = None) -> Received | None:
+        """Next sample; queue.Empty after `timeout` s; None when undeclared and fully delivered."""
+        if not self._pending:
+            batch = self.take(timeout=timeout)
+            if batch is None:
+                return None
+            self.stats.delivered -= len(batch)  # counted as each is handed out
+            self._pending.extendleft(reversed(batch))  # before what `take` held back, if anything
+        self.stats.delivered += 1
+        return self._pending.popleft()
+
+    def __iter__(self) -> Iterator[Received]:
+        while (item := self.get()) is not None:
+            yield item
+
+    def undeclare(self) -> None:
+        """Stop receiving; samples already received are still delivered, then `take` returns None."""
+        if self._undeclared_at is None:
+            self._undeclared_at = time.monotonic()
+            for subscriber in self._subscribers:
+                subscriber.undeclare()
+
+    def close(self) -> None:
+        self.undeclare()
+        self.stats.discarded += len(self._pending)
+        self._pending.clear()
+        while self._handlers and time.monotonic() - self._undeclared_at <= self.CLOSE_TIMEOUT_S:
+            taken = self._sweep(1 << 30)
+            self.stats.discarded += len(taken)
+            if not taken:
+                time.sleep(self.ACTIVE_PAUSE_S)
+        self._handlers.clear()
+
+    def __enter__(self) -> "PolledSubscription":
         return self
 
     def __exit__(self, *exc: object) -> None:

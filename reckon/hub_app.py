@@ -1,7 +1,7 @@
 """`reckon hub`: the venue's hub over Zenoh. Every agent's streams in; corrected poses and corrections out.
 
-One subscription to the agents' input streams (a blocking queue: a slow hub slows the edges
-down, it never loses a measurement) feeds `hub.venue_hub.VenueHub` (chairs' corrections, pedestrians' map matching, camera identities) on one
+One subscription to the agents' input streams (`reckon.bus.PolledSubscription`: taken in batches on
+the hub's thread; a slow hub's full FIFOs slow the edges down, it never loses a measurement) feeds `hub.venue_hub.VenueHub` (chairs' corrections, pedestrians' map matching, camera identities) on one
 thread, in arrival order. Its
 outputs go out at once: live poses on `reckon/<venue>/<agent>/pose/live`, refined ones on
 `.../pose/refined`, corrections to the edges on `.../correction`. A swimmer's lengths
@@ -41,10 +41,12 @@ from protocol import keys
 from protocol.errors import ConfigError, InputError
 from protocol.session import Session
 from protocol.session_log import LogMessages, SessionWriter
-from reckon.bus import Alive, Publisher, Subscription, open_session
+from reckon.bus import Alive, PolledSubscription, Publisher, open_session
 
 log = logging.getLogger(__name__)
 POLL_S = 0.1
+BATCH = 256  # samples taken from the FIFOs at a time
+FIFO_CAPACITY = 1024  # per input selector: what the hub holds before Zenoh pushes back on the edges
 INPUTS = ("imu/*", "beacon/*", "pose/edge", "event/impact", "event/scan", "fix", "length", "tracks/*")  # tracks: camera frames
 WARN_EVERY_S = 10.0
 SNAPSHOT_EVERY_S = 2.0  # a restarted hub re-applies at most this much of its recording
@@ -134,7 +136,10 @@ def run_hub(config: zenoh.Config, session: Session, stop: threading.Event, setti
         publisher = stack.enter_context(Publisher(bus))
         # Inputs only: were the hub subscribed to its own outputs, a full queue would block its
         # own publishing, which only it can drain.
-        subscription = stack.enter_context(Subscription(bus, [keys.all_agents(venue, stream) for stream in INPUTS]))
+        # Taken in batches on this thread (no drain threads: see PolledSubscription), each batch in the
+        # order its samples were published, whatever their streams: as they arrived, not stream by stream.
+        subscription = stack.enter_context(PolledSubscription(bus, [keys.all_agents(venue, stream) for stream in INPUTS],
+                                                              fifo_capacity=FIFO_CAPACITY, by_source_time=True))
         stack.enter_context(Alive(bus, venue, wire.Role.HUB))
         if on_bus:
             stack.enter_context(on_bus(bus))
@@ -157,47 +162,50 @@ def run_hub(config: zenoh.Config, session: Session, stop: threading.Event, setti
         while True:
             if stop.is_set() and not stopping:
                 stopping = True
-                subscription.undeclare()  # what was received before still comes out of `get`
+                subscription.undeclare()  # what was received before still comes out of `take`
             try:
-                item = subscription.get(timeout=POLL_S)
+                batch = subscription.take(BATCH, timeout=POLL_S)
             except queue.Empty:
                 continue
-            if item is None:
+            if batch is None:
                 break
-            if item.delete:
-                continue
-            try:
-                message = item.decode()
-                if dedup.check(item.key, message) is not Verdict.NEW:
+            for item in batch:
+                if item.delete:
                     continue
-                if writer:
-                    writer.write(item.key, message, item.received_ns)
-                    recorded += 1
-                if on_input:
-                    on_input(message)
-                summary.inputs += 1
-                if message.DESCRIPTOR.name == "SwimLength":
-                    line = summary.swims.setdefault(message.sensor_id, SwimTotals()).add(message)
-                    log.info("%s %s", message.sensor_id, line)
-                    if on_output:
-                        on_output(message)
-                    continue
-                emit(hub.on_message(message, item.received_ns))
-            except (InputError, ValueError) as error:
-                summary.skipped += 1
-                skipped_since += 1
-                if time.monotonic() - last_warning >= WARN_EVERY_S:
-                    log.warning("skipped %d samples; latest on %s: %s", skipped_since, item.key, error)
-                    skipped_since, last_warning = 0, time.monotonic()
-            if state is not None and time.monotonic() >= next_snapshot:
-                _checkpoint(state, writer, output, hub_state.HubState(hub, dedup, output.name, recorded))
-                next_snapshot, next_flush = time.monotonic() + snapshot_every_s, time.monotonic() + FLUSH_EVERY_S
-            elif state is not None and time.monotonic() >= next_flush:
-                writer.flush()
-                next_flush = time.monotonic() + FLUSH_EVERY_S
+                try:
+                    message = item.decode()
+                    if dedup.check(item.key, message) is not Verdict.NEW:
+                        continue
+                    if writer:
+                        writer.write(item.key, message, item.received_ns)
+                        recorded += 1
+                    if on_input:
+                        on_input(message)
+                    summary.inputs += 1
+                    if message.DESCRIPTOR.name == "SwimLength":
+                        line = summary.swims.setdefault(message.sensor_id, SwimTotals()).add(message)
+                        log.info("%s %s", message.sensor_id, line)
+                        if on_output:
+                            on_output(message)
+                        continue
+                    emit(hub.on_message(message, item.received_ns))
+                except (InputError, ValueError) as error:
+                    summary.skipped += 1
+                    skipped_since += 1
+                    if time.monotonic() - last_warning >= WARN_EVERY_S:
+                        log.warning("skipped %d samples; latest on %s: %s", skipped_since, item.key, error)
+                        skipped_since, last_warning = 0, time.monotonic()
+                if state is not None and time.monotonic() >= next_snapshot:
+                    _checkpoint(state, writer, output, hub_state.HubState(hub, dedup, output.name, recorded))
+                    next_snapshot, next_flush = time.monotonic() + snapshot_every_s, time.monotonic() + FLUSH_EVERY_S
+                elif state is not None and time.monotonic() >= next_flush:
+                    writer.flush()
+                    next_flush = time.monotonic() + FLUSH_EVERY_S
         if state is not None:  # before the final flush: a hub restarted from it carries on the session
             _checkpoint(state, writer, output, hub_state.HubState(hub, dedup, output.name, recorded))
-        emit(hub.flush())
+        for part in hub.chairs.flush_by_agent():  # one agent's refined track at a time, not the venue's at once
+            emit(part)
+        emit(hub.flush())  # the rest (pedestrians); the chairs' smoothers are empty now
         summary.full_waits = subscription.stats.full_waits
     summary.corrections = {view.agent_id: dict(view.applied) for view in hub.agents.values()}
     summary.pairs = hub.counters.pairs

@@ -25,8 +25,8 @@ from protocol import bus as wire
 from protocol import keys, messages
 from protocol.errors import ConfigError, InputError
 from protocol.session_log import read_session
-from reckon.bus import (Alive, BusError, Publisher, Subscription, open_session, wait_for_peers,
-                        zenoh_config)
+from reckon.bus import (Alive, BusError, PolledSubscription, Publisher, Subscription, flush, open_session,
+                        wait_for_peers, zenoh_config)
 from reckon.record import RecordSummary, record
 from reckon.replay import ReplayProgress, ReplaySummary, replay
 from sim_devices.wheelchair import simulate
@@ -238,6 +238,96 @@ def test_slow_subscriber_loses_nothing():
     assert sequences == list(range(count))
     assert subscription.stats.full_waits > 0  # the queue did fill: the publisher was held back, not dropped
     assert subscription.stats.discarded == 0 and subscription.stats.received == count
+
+
+def test_polled_subscription_holds_the_publisher_back_and_loses_nothing():
+    """The hub's subscription (no drain thread): while nobody takes, its small FIFO fills and the
+    publisher is held back (2,000 samples of 12 kB, 24 MB, cannot all sit in Zenoh's and TCP's
+    buffers); then every sample comes out once, in order, across two selectors, in batches."""
+    endpoint, count = free_endpoint(), 2000
+    imu, beacon = keys.imu(VENUE, "a", "a-seat"), keys.beacon(VENUE, "a", "a-seat")
+    big = {**SAMPLES["ImuBatch"], "accel_g": [0.5] * 1000, "gyro_dps": [1.5] * 1000, "mag_gauss": [0.25] * 1000}
+    with open_session(zenoh_config(listen=[endpoint])) as hub, open_session(zenoh_config(connect=[endpoint])) as edge:
+        with PolledSubscription(hub, [imu, beacon], fifo_capacity=4) as subscription, \
+                Alive(hub, VENUE, wire.Role.HUB):
+            wait_for_peers(edge, wire.alive_selector(VENUE, wire.Role.HUB), 1, WAIT_S)
+
+            def publish_all() -> int:
+                with Publisher(edge) as publisher:
+                    for sequence in range(count):
+                        publisher.publish(imu, messages.new("ImuBatch", **{**big, "sequence": sequence}))
+                        publisher.publish(beacon, messages.new("BeaconSighting", **{**SAMPLES["BeaconSighting"],
+                                                                                    "timestamp_ns": sequence + 1}))
+                    return publisher.sent
+
+            thread, outcome = run_in_thread(publish_all)
+            thread.join(timeout=1.0)
+            assert thread.is_alive()  # held back: nothing was taken, so the FIFOs are full
+            taken: dict[str, list[int]] = {imu: [], beacon: []}
+            batches = 0
+            while sum(map(len, taken.values())) < 2 * count:
+                for item in subscription.take(limit=64, timeout=WAIT_S):
+                    message = item.decode()
+                    taken[item.key].append(message.sequence if item.key == imu else message.timestamp_ns - 1)
+                    assert item.source_ns is not None and item.received_ns > 0
+                batches += 1
+            assert joined(thread, outcome) == 2 * count
+            with pytest.raises(queue.Empty):
+                subscription.take(timeout=0.2)  # nothing beyond what was sent
+            subscription.undeclare()
+            assert subscription.take(timeout=WAIT_S) is None and subscription.get(timeout=WAIT_S) is None
+    assert taken[imu] == list(range(count)) and taken[beacon] == list(range(count))
+    assert batches < 2 * count  # taken many at a time
+    assert subscription.stats.full_waits > 0 and subscription.stats.discarded == 0
+    assert subscription.stats.received == subscription.stats.delivered == 2 * count
+
+
+def test_polled_subscription_delivers_what_came_before_undeclare_and_close_discards_the_rest():
+    endpoint = free_endpoint()
+    key = keys.pose(VENUE, "a", "edge")
+    pose = messages.new("EstimatedPose", **SAMPLES["EstimatedPose"])
+    with open_session(zenoh_config(listen=[endpoint])) as hub, open_session(zenoh_config(connect=[endpoint])) as edge:
+        first = PolledSubscription(hub, key, fifo_capacity=64)
+        second = PolledSubscription(hub, key, fifo_capacity=64)
+        with Alive(hub, VENUE, wire.Role.HUB):
+            wait_for_peers(edge, wire.alive_selector(VENUE, wire.Role.HUB), 1, WAIT_S)
+            with Publisher(edge) as publisher:
+                for _ in range(10):
+                    publisher.publish(key, pose)
+            assert flush(edge, wire.alive_selector(VENUE, wire.Role.HUB), WAIT_S)  # all 10 are in both FIFOs
+            assert first.get(timeout=WAIT_S).decode() == pose  # one handed out, nine held
+            first.undeclare()
+            rest = []
+            while (batch := first.take(timeout=WAIT_S)) is not None:
+                rest += batch
+            assert len(rest) == 9 and first.stats.delivered == 10 and first.stats.discarded == 0
+            assert len(second.take(limit=3, timeout=WAIT_S)) >= 1
+            second.close()
+            assert second.stats.received == 10 and second.stats.discarded == 10 - second.stats.delivered > 0
+            assert second.take(timeout=0.1) is None
+        first.close()
+
+
+def test_polled_subscription_by_source_time_gives_the_order_of_the_puts_across_selectors():
+    """The hub's order: a sweep of several FIFOs comes out as the samples were published, not
+    stream by stream (the FIFOs are read a chunk at a time)."""
+    endpoint, count = free_endpoint(), 300
+    pose_key, beacon = keys.pose(VENUE, "a", "edge"), keys.beacon(VENUE, "a", "a-seat")
+    with open_session(zenoh_config(listen=[endpoint])) as hub, open_session(zenoh_config(connect=[endpoint])) as edge:
+        with PolledSubscription(hub, [pose_key, beacon], fifo_capacity=4 * count, by_source_time=True) as subscription, \
+                Alive(hub, VENUE, wire.Role.HUB):
+            wait_for_peers(edge, wire.alive_selector(VENUE, wire.Role.HUB), 1, WAIT_S)
+            with Publisher(edge) as publisher:
+                for n in range(count):
+                    publisher.publish(pose_key, messages.new("EstimatedPose", **{**SAMPLES["EstimatedPose"],
+                                                                                 "timestamp_ns": n}))
+                    publisher.publish(beacon, messages.new("BeaconSighting", **{**SAMPLES["BeaconSighting"],
+                                                                                "timestamp_ns": n}))
+            assert flush(edge, wire.alive_selector(VENUE, wire.Role.HUB), WAIT_S)  # all in the FIFOs
+            batch = subscription.take(limit=4 * count, timeout=WAIT_S)
+    assert [(item.key, item.decode().timestamp_ns) for item in batch] == [
+        (key, n) for n in range(count) for key in (pose_key, beacon)]
+    assert all(item.received_ns == batch[0].received_ns for item in batch)  # one sweep, one clock reading
 
 
 def test_recorder_started_after_the_replayer_waits_gets_everything(game, tmp_path):
