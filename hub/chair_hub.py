@@ -42,7 +42,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -65,7 +65,7 @@ HISTORY = 1024  # poses kept per agent for looking back to a measured time (20 s
 class HubSettings:
     lag_s: float = 30.0  # refined poses leave this late (a pass near a goal every 10-30 s)
     pose_rate_hz: float = 50.0  # of the edges; sizes the smoother's ring
-    corrections: frozenset[str] = frozenset(CORRECTIONS)
+    corrections: Collection[str] = CORRECTIONS  # kept as a tuple in CORRECTIONS' order (below)
     impact_g: float = 6.0  # lower than the paper's 8 g: the gate, not the threshold, rejects false pairs
     pairing_window_s: float = 0.5
     lateness_s: float = 1.0  # how long a group waits for the other chairs' impacts to arrive
@@ -83,6 +83,9 @@ class HubSettings:
         unknown = set(self.corrections) - set(CORRECTIONS)
         if unknown:
             raise ValueError(f"corrections {sorted(unknown)}: not among {', '.join(CORRECTIONS)}")
+        # A tuple in a fixed order, not a set: a set's order depends on how it was built, so a hub
+        # restored from a snapshot would pickle differently from the same hub that never stopped.
+        object.__setattr__(self, "corrections", tuple(c for c in CORRECTIONS if c in set(self.corrections)))
         if not (0 <= self.lag_s < math.inf and 0 < self.pose_rate_hz < math.inf):  # refuses NaN too
             raise ValueError(f"lag_s {self.lag_s} must be finite and >= 0, pose_rate_hz {self.pose_rate_hz} finite and > 0")
 
@@ -160,7 +163,9 @@ class ChairHub:
         # The agents still short of it are found once per oldest impact and leave as they pass, so
         # a pose costs O(1) instead of a scan of every agent (500 chairs: 25,000 scans a second).
         self._oldest_impact_ns: int | None = None  # None: to be found again (the set below with it)
-        self._short: set[str] = set()
+        # A dict used as an ordered set: a set's iteration order depends on its add/discard history,
+        # so a snapshot restored and caught up (hub/hub_state.py) would pickle differently.
+        self._short: dict[str, None] = {}
         self.counters = HubCounters()
 
     # -- inputs ------------------------------------------------------------------------------
@@ -381,12 +386,12 @@ class ChairHub:
         if self._oldest_impact_ns is None:
             self._oldest_impact_ns = min(self.impacts)[0]
             due = self._oldest_impact_ns + hold_ns
-            self._short = {v.agent_id for v in self.agents.values() if v.latest_ns is not None and v.latest_ns < due}
+            self._short = {v.agent_id: None for v in self.agents.values() if v.latest_ns is not None and v.latest_ns < due}
         due = self._oldest_impact_ns + hold_ns
         if posed.latest_ns < due:
-            self._short.add(posed.agent_id)  # also an agent whose first pose this is
+            self._short[posed.agent_id] = None  # also an agent whose first pose this is
         else:
-            self._short.discard(posed.agent_id)
+            self._short.pop(posed.agent_id, None)
         stale_ns = self.settings.stale_s * 1e9
         return any(self.newest_arrival_ns - self.agents[a].arrival_ns <= stale_ns for a in self._short)
 
