@@ -6,7 +6,9 @@ order of people. Here every hop (HOP_S of camera time) the newest bins of motion
 - speed: a chair's dead-reckoned speed, a pedestrian's from its waist activity (the paper's cue);
 - turn rate: gyro about the vertical against the rotation of the track's velocity;
 - moving or still;
-- position: the track against where the agent was last seen or, for a chair, the hub's pose.
+- position: the track against where the agent was last seen or, for a chair, the hub's pose;
+- stature (trackers that report head heights): how much worse the agent's motion has matched tracks
+  of this head height than of its best-matching one, over the session (StatureProfile).
 Each bin gives a normalised squared error per cue (about 1 for the right pair). A pair's evidence
 is the forgetting mean of its bins' costs (factor FORGET_PER_S per second, after a prior that
 makes a new track earn its identity). The assignment is the Hungarian method (scipy) over tracks
@@ -16,7 +18,8 @@ SWITCH_MARGIN so identities do not flicker. Work per hop is tracks x agents x ne
 An identified track gives its agent a PositionFix (kind VIDEO) every FIX_EVERY_S while the pair's
 evidence is clear; the hub turns it into a correction like any fix. An agent without a track is
 carried by its own dead reckoning (the hub's pose) until a track matches again.
-The camera's clock offset is searched (±MAX_LAG_S) on the identified pairs every LAG_EVERY_S.
+The camera's clock offset is searched on the identified chairs every lag_every_s, within max_lag_s
+of lag_prior_s in total (pedestrians' turn rates do not separate pairs: docs/identity.md).
 
 Four rules follow the tracker's own errors (docs/identity.md): a new track that starts where an
 agent's broken-off track was heading (and where the hub has it) continues that identity and its
@@ -38,8 +41,8 @@ from scipy.optimize import linear_sum_assignment
 
 from hub.clocks import ClockOffsets
 from hub.identity_assign import BIG, components, exclusion_margin, padded, swap_bound
-from hub.identity_cues import (BIN_NS, BIN_S, MOVING_MPS, TRACK_DELAY_BINS, TURN_BINS, AgentCues, SpeedModel,
-                               TrackCues, agent_hop_blocks, track_hop_cues)
+from hub.identity_cues import (BIN_NS, BIN_S, MOVING_MPS, TRACK_DELAY_BINS, TURN_BINS, AgentCues, StatureProfile,
+                               SpeedModel, TrackCues, agent_hop_blocks, track_hop_cues)
 from protocol import messages
 from protocol.messages import CorrectionKind
 from protocol.session import AgentKind, Mount, Session
@@ -53,6 +56,8 @@ class IdentitySettings:
     hop_s: float = 0.5
     delay_s: float = 0.6  # bins are scored this long after the camera saw them: the IMU has arrived by then
     forget_per_s: float = 0.7  # evidence half-life about 2 s: a tracker's swap is followed within seconds
+    pedestrian_forget_per_s: float = 0.8  # ... a pedestrian's (half-life 3.1 s): its cues are weak per bin, and a
+    # room's tracker breaks tracks rather than swapping them
     prior_bins: float = 4.0  # a new pair starts with this many bins at prior_cost
     prior_cost: float = 2.0
     # each side; a pair is taken when its evidence is below twice this. 0.6 before the hub's honest
@@ -72,13 +77,17 @@ class IdentitySettings:
     continue_coast_s: float = 1.0  # the old track's velocity is extrapolated at most this long
     continue_margin_m: float = 0.7  # ... and the hub expects no other agent within this much of as close
     continue_clear_m: float = 0.6  # a new track this close to another live track may be a second detection: no
+    continue_height_m: float = 0.1  # ... nor one whose head height differs from the old track's by more (3 frame sd)
     birth_sd_m: float = 0.3  # a chair with no track, placed this surely by the hub, names a new track there (0: no)
     encounter_m: float = 1.3  # tracks this close may swap or merge: evidence from before they met is restarted
     encounter_keep: float = 0.2  # ... except this share of the holder's own, so its identity holds until beaten
     share_merges: bool = True  # an agent whose track ends inside a held one shares it until they part
     share_m: float = 0.6  # ... inside: this close (a merged track sits at its people's centroid)
-    max_lag_s: float = 0.5
+    max_lag_s: float = 0.5  # the camera's clock offset is searched within this much of lag_prior_s (an absolute bound)
+    lag_prior_s: float = 0.0  # ... the configured offset (camera stamps minus venue time)
     lag_every_s: float = 5.0
+    lag_pedestrians: bool = False  # pedestrians' turn rates take part in the lag search (room: they do not separate)
+    stature_weight: float = 4.0  # per bin, x how much worse the agent's motion matched tracks of this height (0: off)
     speed_sd_mps: float = 0.35
     yaw_sd_dps: float = 25.0
     moving_sd: float = 0.7
@@ -88,7 +97,8 @@ class IdentitySettings:
     position_clip: float = 4.0  # ... nor the hub's pose's (chairs): it can be wrong by metres, the motion cues not
 
     def __post_init__(self) -> None:
-        checks = {"hop_s": (0.1, 10.0), "delay_s": (0.0, 10.0), "forget_per_s": (0.01, 1.0), "prior_bins": (0.0, 1e3),
+        checks = {"hop_s": (0.1, 10.0), "delay_s": (0.0, 10.0), "forget_per_s": (0.01, 1.0),
+                  "pedestrian_forget_per_s": (0.01, 1.0), "prior_bins": (0.0, 1e3),
                   "nobody_cost": (0.0, 100.0), "claim_margin": (0.0, 100.0), "switch_margin": (0.0, 100.0),
                   "fix_every_s": (0.0, 3600.0), "track_timeout_s": (0.0, 60.0), "max_lag_s": (0.0, 5.0),
                   "continue_max_s": (0.0, 60.0), "continue_gate_m": (0.0, 100.0), "continue_spread_mps": (0.0, 100.0),
@@ -96,7 +106,8 @@ class IdentitySettings:
                   "continue_margin_m": (0.0, 100.0), "birth_sd_m": (0.0, 100.0), "encounter_m": (0.0, 100.0),
                   "encounter_keep": (0.0, 1.0), "share_m": (0.0, 100.0),
                   "speed_sd_mps": (1e-3, 10.0), "yaw_sd_dps": (1e-3, 1e3), "moving_sd": (1e-3, 10.0),
-                  "position_sd_m": (1e-3, 100.0)}
+                  "position_sd_m": (1e-3, 100.0), "lag_prior_s": (-5.0, 5.0), "continue_height_m": (0.0, 10.0),
+                  "stature_weight": (0.0, 100.0)}
         for name, (low, high) in checks.items():
             value = getattr(self, name)
             if not low <= value <= high:
@@ -127,13 +138,14 @@ class _Lost:
     velocity: np.ndarray  # m/s, NaN if the track was not moving fast enough to have one
     cost_sum: np.ndarray
     cost_count: np.ndarray
+    height_m: float = float("nan")  # the old track's reported head height (NaN: the tracker reports none)
 
     @classmethod
     def of(cls, camera: str, track: _Track) -> _Lost:
         last_bin = track.cues.last_ns // BIN_NS
         velocity = np.array([track.cues.ring.window(name, last_bin, 1)[0] for name in ("vx", "vy")])
         return cls(camera, track.cues.last_ns, track.cues.latest_xy.copy(), velocity, track.cost_sum.copy(),
-                   track.cost_count.copy())
+                   track.cost_count.copy(), track.cues.height())
 
 
 @dataclass
@@ -179,11 +191,13 @@ class IdentityEngine:
         self.start_xy = {self.index[a.id]: np.array([a.start_x_m, a.start_y_m]) for a in session.agents
                          if a.id in self.index}
         self.is_chair = np.array([kind is AgentKind.WHEELCHAIR for kind in self.kinds], dtype=bool)
+        self.is_pedestrian = np.array([kind is AgentKind.PEDESTRIAN for kind in self.kinds], dtype=bool)
         self.by_sensor = {cues.sensor_id: i for i, cues in enumerate(self.agents)}
         count = len(self.agents)
         self.seen_xy = np.full((count, 2), np.nan)  # where each agent's track last was
         self.seen_ns = np.zeros(count, dtype=np.int64)
         self.speed_model = SpeedModel()
+        self.statures = StatureProfile(count)
         self.tracks: dict[tuple[str, int], _Track] = {}
         self.lost: dict[int, _Lost] = {}  # agent -> where its last track broke off (until it holds another)
         self.scored_until: dict[str, int] = {}  # camera -> first bin not yet scored
@@ -225,10 +239,12 @@ class IdentityEngine:
     def on_frame(self, frame: Any) -> list[Any]:
         camera = frame.camera_id
         self.counters.frames += 1
-        lag_ns = self.lag_bins.get(camera, 0) * BIN_NS
+        lag_ns = self.lag_bins.setdefault(camera, int(round(self.settings.lag_prior_s / BIN_S))) * BIN_NS
         time_ns = frame.timestamp_ns - lag_ns
         new = []
-        for track_id, x, y in zip(frame.track_id, frame.x_m, frame.y_m):
+        count = len(frame.track_id)
+        heights = frame.height_m if len(frame.height_m) == count else [float("nan")] * count  # none: no height cue
+        for track_id, x, y, height in zip(frame.track_id, frame.x_m, frame.y_m, heights):
             key = (camera, int(track_id))
             track = self.tracks.get(key)
             if track is None:
@@ -236,7 +252,7 @@ class IdentityEngine:
                                                   np.zeros(len(self.agents)), born_ns=time_ns)
                 self.counters.tracks += 1
                 new.append(key)
-            track.cues.push(time_ns, float(x), float(y))
+            track.cues.push(time_ns, float(x), float(y), float(height))
         out = self._continue(camera, new, time_ns) if new else []
         bin_now = time_ns // BIN_NS
         first = self.scored_until.setdefault(camera, bin_now)
@@ -282,7 +298,9 @@ class IdentityEngine:
             xy = self.tracks[key].cues.latest_xy
             if len(live) and np.hypot(*(live - xy).T).min() < s.continue_clear_m:
                 continue
-            matches[key] = [i for i, lost in candidates.items() if self._continues(i, lost, xy, now_ns)]
+            height = self.tracks[key].cues.latest_height
+            matches[key] = [i for i, lost in candidates.items() if self._continues(i, lost, xy, now_ns)
+                            and not abs(height - lost.height_m) > s.continue_height_m]  # NaN: no heights, no test
         poses = [self.pose_of(cues.agent_id, now_ns) if self.pose_of else None for cues in self.agents]
         for key, agents in matches.items():
             i = agents[0] if len(agents) == 1 else -1
@@ -379,7 +397,7 @@ class IdentityEngine:
         count = end - first
         agent_cues = self._agent_windows(first, count)
         costs = self._bin_costs(tracks, agent_cues, first, count, camera_sd_m)  # (T, A, bins), NaN = not comparable
-        forget = s.forget_per_s ** (count * BIN_S)
+        forget = np.where(self.is_pedestrian, s.pedestrian_forget_per_s, s.forget_per_s) ** (count * BIN_S)
         bins = np.arange(first, end)
         for row, track in enumerate(tracks):
             valid = np.isfinite(costs[row])
@@ -532,6 +550,11 @@ class IdentityEngine:
         # each cue adds its excess over what the right pair would show on average (1, a normalised
         # squared error); a bin counts once its speed (both sides) is known
         excess = np.where(present, stack - 1.0, 0.0).sum(axis=0)
+        if s.stature_weight > 0 and np.isfinite(cues["height"]).any():
+            motion = np.where(present[0], np.where(present[:3], stack[:3] - 1.0, 0.0).sum(axis=0), np.nan)
+            stature = self.statures.cost(cues["height"])  # from the bins before these: a bin never judges itself
+            self.statures.learn(cues["height"], motion)
+            excess = excess + np.where(np.isfinite(stature), s.stature_weight * stature, 0.0)
         return np.where(present[0], excess, np.nan)
 
     def _position_cost(self, tracks: list[_Track], t_x: np.ndarray, t_y: np.ndarray, first: int, count: int,
@@ -662,20 +685,26 @@ class IdentityEngine:
             self.speed_model.learn(self.agents[i].ring.window("activity", first, count), track.cues.speed(first, count))
 
     def _search_lag(self, camera: str, tracks: list[_Track], end: int) -> None:
-        """Shift the camera's bins against the agents' to where the identified pairs' turn rates agree best."""
+        """Shift the camera's bins against the agents' to where the identified pairs' turn rates agree best,
+        within max_lag_s of the configured lag_prior_s (an absolute bound: successive moves never add up
+        beyond it)."""
         s = self.settings
-        pairs = [(t, t.agent) for t in tracks if t.agent >= 0]
+        pairs = [(t, t.agent) for t in tracks if t.agent >= 0
+                 and (s.lag_pedestrians or self.kinds[t.agent] is not AgentKind.PEDESTRIAN)]
         if not pairs:
             return
         span = int(4.0 / BIN_S)
+        prior = int(round(s.lag_prior_s / BIN_S))
         max_lag = int(round(s.max_lag_s / BIN_S))
-        scores = np.zeros(2 * max_lag + 1)
-        counts = np.zeros(2 * max_lag + 1)
-        lags = np.arange(-max_lag, max_lag + 1)
+        current = self.lag_bins.get(camera, prior)
+        lags = np.arange(prior - max_lag, prior + max_lag + 1) - current  # moves that stay within the bound
+        reach = int(np.abs(lags).max())
+        scores = np.zeros(len(lags))
+        counts = np.zeros(len(lags))
         # an agent's bins end - span - TRACK_DELAY_BINS - lag ...: one read covers every lag and the turn
-        lo = end - span - TRACK_DELAY_BINS - max_lag - TURN_BINS
-        width = span + 2 * max_lag + TURN_BINS
-        take = (max_lag - lags)[:, None] + np.arange(span)[None, :] + TURN_BINS  # (lags, span) into the read
+        lo = end - span - TRACK_DELAY_BINS - reach - TURN_BINS
+        width = span + 2 * reach + TURN_BINS
+        take = (reach - lags)[:, None] + np.arange(span)[None, :] + TURN_BINS  # (lags, span) into the read
         for track, i in pairs:
             t_yaw = track.cues.turn_rate(end - span, span)
             ring = self.agents[i].ring
@@ -689,9 +718,10 @@ class IdentityEngine:
         if counts.min() < 20:
             return
         mean = scores / counts
-        best = int(np.argmin(mean)) - max_lag
-        if mean[best + max_lag] < mean[max_lag] - 0.2:  # move only when clearly better than no change
-            self.lag_bins[camera] = self.lag_bins.get(camera, 0) + best
+        k = int(np.argmin(mean))
+        stay = int(np.flatnonzero(lags == 0)[0])
+        if mean[k] < mean[stay] - 0.2:  # move only when clearly better than no change
+            self.lag_bins[camera] = current + int(lags[k])
             self.counters.lag_bins = self.lag_bins[camera]
 
     def _drop(self, key: tuple[str, int], now_ns: int) -> list[Any]:

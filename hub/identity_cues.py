@@ -10,6 +10,8 @@ can be compared bin by bin:
   (only meaningful while it moves). A track's cues describe its last TRACK_FIT_S, so an agent's
   instantaneous cues are compared TRACK_DELAY_BINS earlier.
 - `moving` (0/1): speed above MOVING_MPS; for a pedestrian, activity above its threshold.
+- `height` (m): a track's reported head height, where the tracker gives one; `StatureProfile`
+  learns which heights each agent's motion matches.
 
 Everything is stored in fixed rings of CAPACITY bins (the comparison window plus margin), so
 memory is constant per agent and per live track.
@@ -110,6 +112,61 @@ class SpeedModel:
         self._sums = self._sums * keep + np.array([len(a), a.sum(), s.sum(), (a * a).sum(), (a * s).sum()])
 
 
+class StatureProfile:
+    """How well each agent's motion has matched tracks of each reported head height, over the session.
+
+    A camera that reports the head top's height sees each person at their own stature on every track
+    of theirs. Every scored bin of every live track (held or not: no feedback from the assignment)
+    adds the agent's motion cost (speed, moving, turn rate) to the cell of the track's height; over
+    minutes the agent's own stature collects the lowest mean cost, a bystander's or another wearer's
+    a higher one. The cue is that mean cost, smoothed over heights, above its lowest value: ~0 for
+    tracks at the agent's stature. Unsupervised and never from truth."""
+
+    LOW_M, STEP_M, CELLS = 0.5, 0.01, 200  # head heights 0.5-2.5 m in 1 cm cells
+
+    def __init__(self, agents: int, smooth_m: float = 0.02, prior_bins: float = 200.0):
+        self.sums = np.zeros((agents, self.CELLS))
+        self.counts = np.zeros((agents, self.CELLS))
+        half = int(3 * smooth_m / self.STEP_M)
+        kernel = np.exp(-0.5 * (np.arange(-half, half + 1) * self.STEP_M / smooth_m) ** 2)
+        self.kernel = kernel / kernel.sum()
+        self.prior_bins = prior_bins  # each cell starts as this many bins at the agent's mean over all heights
+        self._profile: np.ndarray | None = None
+
+    def cells(self, height_m: np.ndarray) -> np.ndarray:
+        return np.clip(np.round((height_m - self.LOW_M) / self.STEP_M), 0, self.CELLS - 1).astype(np.int64)
+
+    def learn(self, height_m: np.ndarray, motion: np.ndarray) -> None:
+        """height_m (tracks, bins); motion (tracks, agents, bins) excess cost, NaN where not compared."""
+        ok = np.isfinite(height_m)[:, None, :] & np.isfinite(motion)
+        if not ok.any():
+            return
+        t, a, k = np.nonzero(ok)
+        cell = self.cells(height_m[t, k])
+        np.add.at(self.sums, (a, cell), motion[t, a, k])
+        np.add.at(self.counts, (a, cell), 1.0)
+        self._profile = None
+
+    def profile(self) -> np.ndarray:
+        """(agents, cells): smoothed mean motion cost above the agent's lowest; NaN where too little is known."""
+        if self._profile is None:
+            smooth = lambda m: np.apply_along_axis(lambda r: np.convolve(r, self.kernel, mode="same"), 1, m)
+            total = self.counts.sum(axis=1, keepdims=True)
+            overall = self.sums.sum(axis=1, keepdims=True) / np.maximum(total, 1.0)
+            sums, counts = smooth(self.sums), smooth(self.counts)
+            mean = (sums + overall * self.prior_bins) / (counts + self.prior_bins)  # thin cells stay near the mean
+            lowest = mean.min(axis=1, keepdims=True)
+            self._profile = np.where(total >= self.prior_bins, mean - lowest, np.nan)
+        return self._profile
+
+    def cost(self, height_m: np.ndarray) -> np.ndarray:
+        """(tracks, agents, bins) for track heights (tracks, bins); NaN where the height or the profile is unknown."""
+        profile = self.profile()
+        cell = self.cells(np.nan_to_num(height_m, nan=0.0))
+        out = profile[:, cell].transpose(1, 0, 2)
+        return np.where(np.isfinite(height_m)[:, None, :], out, np.nan)
+
+
 class AgentCues:
     """One agent's cues from its body IMU (pedestrian waist, chair seat) and, for chairs, its edge poses."""
 
@@ -180,7 +237,7 @@ def turn_rate(heading_deg_window: Callable[[int, int], np.ndarray], first_bin: i
 class TrackCues:
     """One camera track: its latest positions and, per bin, position and velocity (line fit)."""
 
-    NAMES = ("x", "y", "vx", "vy")
+    NAMES = ("x", "y", "vx", "vy", "height")
 
     def __init__(self, track_id: int, fps_hint: float = 25.0):
         self.track_id = track_id
@@ -190,15 +247,17 @@ class TrackCues:
         self.count = 0
         self.ring = Ring(self.NAMES)
         self.last_ns = 0
+        self.latest_height = float("nan")
 
     @property
     def latest_xy(self) -> np.ndarray:
         return self.xy[(self.count - 1) % len(self.times)]
 
-    def push(self, time_ns: int, x_m: float, y_m: float) -> None:
+    def push(self, time_ns: int, x_m: float, y_m: float, height_m: float = float("nan")) -> None:
         if self.count and time_ns <= self.last_ns:
             return  # a repeated or out-of-order frame
         self.last_ns = time_ns
+        self.latest_height = height_m
         slot = self.count % len(self.times)
         self.times[slot], self.xy[slot] = time_ns * 1e-9, (x_m, y_m)
         self.count += 1
@@ -211,7 +270,8 @@ class TrackCues:
             denominator = float(tc @ tc)
             if denominator > 0:
                 velocity = tc @ (xy[recent] - xy[recent].mean(axis=0)) / denominator
-        self.ring.put(int(time_ns // BIN_NS), x=x_m, y=y_m, vx=float(velocity[0]), vy=float(velocity[1]))
+        self.ring.put(int(time_ns // BIN_NS), x=x_m, y=y_m, vx=float(velocity[0]), vy=float(velocity[1]),
+                      height=height_m)
 
     def at(self, time_ns: int) -> tuple[int, np.ndarray] | None:
         """(time, position) of the newest frame not after `time_ns` among those kept (about 1 s), or None."""
@@ -224,6 +284,12 @@ class TrackCues:
             return None
         k = kept[np.argmax(stamps[kept])]
         return int(stamps[k]), self.xy[k].copy()
+
+    def height(self, seconds: float = 1.0) -> float:
+        """Mean reported head height over the last `seconds` (NaN without heights)."""
+        bins = max(int(round(seconds / BIN_S)), 1)
+        values = self.ring.window("height", int(self.last_ns // BIN_NS) - bins + 1, bins)
+        return float(np.mean(values[np.isfinite(values)])) if np.isfinite(values).any() else float("nan")
 
     def speed(self, first_bin: int, count: int) -> np.ndarray:
         return np.hypot(self.ring.window("vx", first_bin, count), self.ring.window("vy", first_bin, count))
@@ -247,7 +313,8 @@ def track_hop_cues(tracks: list[TrackCues], first_bin: int, count: int) -> dict[
     angle = np.degrees(np.arctan2(px * vy - py * vx, px * vx + py * vy))
     with np.errstate(invalid="ignore"):
         moving = (speed > MOVING_MPS) & (np.hypot(px, py) > MOVING_MPS)
-    return {"speed": speed, "yaw": np.where(moving, angle / (TURN_BINS * BIN_S), np.nan), "x": now[:, 0], "y": now[:, 1]}
+    return {"speed": speed, "yaw": np.where(moving, angle / (TURN_BINS * BIN_S), np.nan), "x": now[:, 0], "y": now[:, 1],
+            "height": now[:, 4]}
 
 
 def agent_hop_blocks(agents: list[AgentCues], first_bin: int, count: int, delay_bins: int) -> dict[str, np.ndarray]:

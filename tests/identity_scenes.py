@@ -86,13 +86,16 @@ def imu_batches(agent_id: str, times: np.ndarray, xy: np.ndarray, rng: np.random
 
 def camera_frames(paths: dict[str, tuple[np.ndarray, np.ndarray]], tracks: list[tuple[int, str, float, float]],
                   rng: np.random.Generator, noise_m: float = 0.05, end_s: float | None = None,
-                  camera: str = "cam1") -> list[tuple[int, object]]:
-    """(arrival_ns, CameraFrame) at FPS. `tracks`: (track id, person or "a+b" merge or "" false, start s, end s)."""
+                  camera: str = "cam1", heights: dict[str, float] | None = None,
+                  height_noise_m: float = 0.03) -> list[tuple[int, object]]:
+    """(arrival_ns, CameraFrame) at FPS. `tracks`: (track id, person or "a+b" merge or "" false, start s, end s).
+    With `heights` (person -> head height, m) the frames report each track's height as a stereo tracker
+    does (a merge at its people's mean, a false track at 1.7 m), with `height_noise_m` per frame."""
     end_s = end_s if end_s is not None else max(t[3] for t in tracks)
     out = []
     wander = {}
     for k, t in enumerate(np.arange(0.0, end_s, 1.0 / FPS)):
-        ids, xs, ys = [], [], []
+        ids, xs, ys, hs = [], [], [], []
         for track_id, who, start, end in tracks:
             if not start <= t < end:
                 continue
@@ -106,8 +109,11 @@ def camera_frames(paths: dict[str, tuple[np.ndarray, np.ndarray]], tracks: list[
             ids.append(track_id)
             xs.append(float(position[0] + rng.normal(0, noise_m)))
             ys.append(float(position[1] + rng.normal(0, noise_m)))
+            if heights is not None:
+                tall = np.mean([heights[p] for p in who.split("+")]) if who else 1.7
+                hs.append(float(tall + rng.normal(0, height_noise_m)))
         frame = messages.new("CameraFrame", timestamp_ns=int(t * S), camera_id=camera, frame=k + 1, track_id=ids,
-                             x_m=xs, y_m=ys, position_sd_m=noise_m)
+                             x_m=xs, y_m=ys, position_sd_m=noise_m, height_m=hs)
         out.append((int(t * S) + 30_000_000, frame))
     return out
 

@@ -291,3 +291,75 @@ def test_a_fix_is_where_the_track_was_at_the_newest_scored_bin_not_its_newest_fr
             if out.DESCRIPTOR.name == "PositionFix":
                 lags.append((message.timestamp_ns - out.timestamp_ns) / S)
     assert lags and min(lags) >= settings.delay_s - 0.1 and max(lags) <= settings.delay_s + settings.hop_s + 0.1
+
+
+def _run_scene(paths: dict, wearers: list[str], tracks: list, end_s: float, settings: IdentitySettings = IdentitySettings(),
+               heights: dict | None = None, chairs: bool = False, camera_shift_s: float = 0.0, seed: int = 1):
+    """As run(), with people who wear no sensor (in `paths`, not in `wearers`), reported head heights and
+    a camera clock `camera_shift_s` ahead of the venue's."""
+    rng = np.random.default_rng(seed)
+    events = [e for p in wearers for e in imu_batches(p, *paths[p], rng, chairs=chairs)]
+    for arrival, frame in camera_frames(paths, tracks, rng, end_s=end_s, heights=heights):
+        frame.timestamp_ns += int(camera_shift_s * S)
+        events.append((arrival, frame))
+    events.sort(key=lambda e: e[0])
+    engine = IdentityEngine(session(wearers, chairs=chairs), settings)
+    changes = [(o.timestamp_ns / S, o.agent_id, o.track_id) for _, m in events for o in engine.on_message(m)
+               if o.DESCRIPTOR.name == "TrackIdentity"]
+    return engine, changes
+
+
+def test_a_broken_track_continues_on_the_new_track_of_its_own_height_not_a_bystanders():
+    """a's track breaks off at 8 s; at 8.5 s two tracks start where it was heading: a's own and a bystander's
+    (no sensor) who came into view beside a. By position alone a's continuation is ambiguous and waits;
+    with the tracker's head heights (a 1.60 m, the bystander 1.78 m) only a's own track fits, at once."""
+    paths = {"a": waypoints_path([(0, 0.5, 1.2), (2, 0.5, 1.2), (14, 5.3, 1.2), (16, 5.3, 1.2)]),
+             "x": waypoints_path([(0, 3.9, 1.75), (8.5, 3.9, 1.75), (10.5, 5.2, 2.6), (16, 5.2, 2.6)])}
+    tracks = [(1, "a", 0, 8), (2, "a", 8.5, 16), (3, "x", 8.5, 16)]
+    heights = {"a": 1.60, "x": 1.78}
+    engine, changes = _run_scene(paths, ["a"], tracks, 16, heights=heights)
+    assert holder_at(changes, "a", 7.9) == 1
+    assert holder_at(changes, "a", 8.6) == 2 and engine.counters.continuations == 1
+    assert holder_at(changes, "a", 12.5) == 2 and all(track != 3 for t, _, track in changes if t < 12.5)
+    _, blind = _run_scene(paths, ["a"], tracks, 16)  # the same scene without heights
+    assert holder_at(blind, "a", 8.6) == 0
+
+
+def test_the_stature_profile_learns_which_head_height_moves_like_each_agent():
+    from hub.identity_cues import StatureProfile
+
+    rng = np.random.default_rng(2)
+    profile = StatureProfile(2)
+    # two tracks per bin: one at 1.62 m, one at 1.75 m; agent 0's motion matches the short one, agent 1's
+    # the tall one (excess cost -0.7 for the right pair, +0.5 for the wrong one, noisy)
+    for _ in range(300):  # 30 s of bins
+        heights = np.vstack([1.62 + rng.normal(0, 0.02, 10), 1.75 + rng.normal(0, 0.02, 10)])
+        motion = np.empty((2, 2, 10))
+        motion[0, 0], motion[1, 1] = rng.normal(-0.7, 0.5, (2, 10))
+        motion[0, 1], motion[1, 0] = rng.normal(0.5, 0.8, (2, 10))
+        profile.learn(heights, motion)
+    cost = profile.cost(np.array([[1.62], [1.75], [np.nan]]))  # (tracks, agents, bins)
+    assert cost[0, 0, 0] < 0.1 and cost[1, 1, 0] < 0.1  # each agent's own height: about its lowest cost
+    assert cost[1, 0, 0] > 0.6 and cost[0, 1, 0] > 0.6  # the other's
+    assert np.isnan(cost[2]).all()  # a track without a height gets no stature cue
+    assert np.isnan(StatureProfile(2).cost(np.array([[1.62]]))).all()  # nothing learnt yet: no cue
+
+
+def test_the_camera_lag_stays_within_its_bound_of_the_prior_however_the_searches_move():
+    """The lag search moves at most max_lag_s from lag_prior_s in total (its moves used to add up without
+    limit): a camera 0.9 s ahead, with the prior at 0, ends within 0.5 s of 0 (outside the bound it cannot
+    find the offset: the prior must be within max_lag_s of the truth); with the prior at 0.7 s it finds it
+    (within 0.2 s on this scene)."""
+    tracks = [(1, "a", 0, 40), (2, "b", 0, 40), (3, "c", 0, 40)]
+    long = {"a": waypoints_path([(0, 0.5, 1.0), (6, 5.0, 2.0), (10, 1.0, 0.6), (16, 4.5, 2.5), (22, 0.8, 2.0),
+                                 (28, 5.0, 0.6), (34, 1.0, 2.6), (40, 4.0, 1.5)]),
+            "b": waypoints_path([(0, 5.0, 1.0), (5, 0.6, 2.0), (11, 4.5, 2.5), (17, 1.0, 0.5), (23, 4.8, 1.5),
+                                 (29, 0.5, 1.0), (35, 4.5, 2.8), (40, 2.0, 2.0)]),
+            "c": waypoints_path([(0, 2.8, 0.4), (7, 2.0, 2.5), (12, 4.8, 1.0), (18, 1.5, 2.5), (24, 3.5, 0.4),
+                                 (30, 1.0, 1.5), (36, 5.0, 2.0), (40, 3.0, 1.0)])}
+    bound = IdentitySettings()
+    engine, _ = _run_scene(long, list(long), tracks, 40, chairs=True, camera_shift_s=0.9)
+    assert abs(engine.lag_bins.get("cam1", 0)) <= round(bound.max_lag_s / 0.1)  # the old search went on to +0.8 s
+    engine, _ = _run_scene(long, list(long), tracks, 40, chairs=True, camera_shift_s=0.9,
+                           settings=IdentitySettings(lag_prior_s=0.7))
+    assert abs(engine.lag_bins["cam1"] - 9) <= 2  # 0.7 s prior; the true 0.9 s found within 0.2 s
