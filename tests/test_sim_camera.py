@@ -139,6 +139,20 @@ def test_the_field_of_view_cuts_tracks_and_a_return_is_a_new_track():
     assert all(f.height_m is not None and np.all(f.height_m == 1.7) for f in recording.frames)  # ROOM reports heads
 
 
+def test_a_head_that_moves_down_is_reported_lower():
+    """A person's head_m (sitting down half way) reaches the frames; without it, the stature throughout."""
+    walker = _line("a", (1.0, 1.5), (4.0, 1.5), 4.0, height_m=1.7)
+    head = np.where(walker.time_ns < 2 * S, 1.7, 1.3)
+    sitting = dataclasses.replace(walker, head_m=head)
+    recording = simulate_tracks([sitting], (5.6, 3.0), _quiet(ROOM), np.random.default_rng(1))
+    times = np.array([f.time_ns for f in recording.frames])
+    heights = np.array([f.height_m[0] for f in recording.frames])
+    assert np.all(heights[times < 1.9 * S] == 1.7) and np.all(heights[times > 2.1 * S] == 1.3)
+    with pytest.raises(ConfigError, match="head_m"):
+        simulate_tracks([dataclasses.replace(walker, head_m=head[:-1])], (5.6, 3.0), _quiet(ROOM),
+                        np.random.default_rng(1))
+
+
 def test_gaps_come_at_the_stated_rate_and_each_gives_a_new_id():
     params = _quiet(gaps__rate_per_min="6", gaps__median_s="0.2", gaps__spread="0")
     recording = simulate_tracks([_line("a", (1.0, 1.0), (19.0, 9.0), 600.0)], AREA, params, np.random.default_rng(7))

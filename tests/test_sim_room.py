@@ -137,6 +137,23 @@ def test_every_activity_of_the_papers_protocol_happens(walk_and_imu):
     assert 0.3 < share["walk_forward"] + share["walk_backward"] + share["walk_sideways"] < 0.8
 
 
+def test_a_seated_head_is_lower_for_the_camera(walk_and_imu):
+    """The tracker reports the head top: about 0.35 m lower while seated, the stature while standing."""
+    from sim_devices.room.session import _truth_steps, _wearer_paths
+
+    params, motion, _ = walk_and_imu
+    steps = _truth_steps(motion, params)
+    for index, path in enumerate(_wearer_paths(motion, params)):
+        activity = motion.plan.activity[steps, index]
+        seated, still = activity == Activity.SEATED, activity == Activity.STAND
+        drop = path.height_m - path.head_m
+        if seated.any():
+            assert 0.25 < np.median(drop[seated]) < 0.5, path.person_id
+        if still.any():
+            assert np.all(np.abs(drop[still]) < 0.05), path.person_id
+    assert (motion.plan.activity == Activity.SEATED).any()
+
+
 # -- waist IMU -----------------------------------------------------------------------------------
 
 

@@ -27,6 +27,7 @@ class PersonPath:
     x_m: np.ndarray
     y_m: np.ndarray
     height_m: float = 1.7  # head-top height; a wheelchair player seated about 1.2
+    head_m: np.ndarray | None = None  # head-top height per sample when it changes (sitting down), else None
 
 
 def check_path(path: PersonPath) -> None:
@@ -38,6 +39,8 @@ def check_path(path: PersonPath) -> None:
     if count == 0 or len(path.x_m) != count or len(path.y_m) != count:
         raise ConfigError(f"{where}: time_ns, x_m, y_m need the same non-zero length "
                           f"({count}, {len(path.x_m)}, {len(path.y_m)})")
+    if path.head_m is not None and (len(path.head_m) != count or not np.all(np.isfinite(path.head_m))):
+        raise ConfigError(f"{where}: head_m needs one finite height per time ({len(path.head_m)} for {count})")
     if count > 1 and np.any(np.diff(path.time_ns) <= 0):
         raise ConfigError(f"{where}: time_ns must increase")
     if not (np.all(np.isfinite(path.x_m)) and np.all(np.isfinite(path.y_m))):

@@ -83,14 +83,14 @@ def simulate_tracks(people: list[PersonPath], area_m: tuple[float, float], param
     lost = rng.random(frames) < camera.frame_loss_rate
     observed = position + _gauss_markov(rng, frames, len(people), noise.correlated_sd_m, noise.correlation_s, dt) \
         + rng.normal(0.0, noise.white_sd_m, position.shape)
-    heights = np.array([p.height_m for p in people])
+    heights = _heights(people, capture_ns)
     model = IdentityModel(params, rng, len(people), dt, fov)
     out: list[CameraFrameData] = []
     for index in range(frames):
         distance = np.linalg.norm(position[index, :, None, :] - position[index, None, :, :], axis=-1)
         tracks = model.step(in_view[index], distance, speed[index])
         if not lost[index]:
-            out.append(_frame(int(stamps[index]), index + 1, tracks, observed[index], heights, ids, params, rng))
+            out.append(_frame(int(stamps[index]), index + 1, tracks, observed[index], heights[index], ids, params, rng))
     counters = dict(model.counters)
     counters.update(frames=len(out), lost_frames=int(lost.sum()),
                     observations=sum(len(f.track_id) for f in out))
@@ -110,6 +110,17 @@ def _positions(people: list[PersonPath], capture_ns: np.ndarray) -> tuple[np.nda
         position[:, column, 0] = np.interp(relative, grid, np.asarray(person.x_m, dtype=np.float64))
         position[:, column, 1] = np.interp(relative, grid, np.asarray(person.y_m, dtype=np.float64))
     return position, valid
+
+
+def _heights(people: list[PersonPath], capture_ns: np.ndarray) -> np.ndarray:
+    """(F, P) head-top heights at the capture times: each person's `head_m` interpolated, else `height_m`."""
+    heights = np.tile(np.array([p.height_m for p in people], dtype=np.float64), (len(capture_ns), 1))
+    for column, person in enumerate(people):
+        if person.head_m is not None:
+            times = np.asarray(person.time_ns, dtype=np.int64)
+            heights[:, column] = np.interp((capture_ns - times[0]).astype(np.float64),
+                                           (times - times[0]).astype(np.float64), np.asarray(person.head_m, np.float64))
+    return heights
 
 
 def _gauss_markov(rng: np.random.Generator, frames: int, people: int, sd_m: float, tau_s: float,

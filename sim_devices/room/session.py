@@ -141,11 +141,14 @@ def _truth_steps(motion: Motion, params: RoomParams) -> np.ndarray:
 
 
 def _wearer_paths(motion: Motion, params: RoomParams) -> list[PersonPath]:
-    """What the camera sees of each wearer: the head top (leaning forward of the pelvis when rising)."""
+    """What the camera sees of each wearer: the head top (leaning forward of the pelvis when rising),
+    whose height moves with the pelvis: down by about 0.35 m when seated, and the gait's bob."""
     steps = _truth_steps(motion, params)
     stamps = _true_ns(motion.time_s[steps], params)
     return [PersonPath(person.person_id, stamps, body.head_xy_m[steps, 0].copy(), body.head_xy_m[steps, 1].copy(),
-                       height_m=person.height_m) for person, body in zip(motion.persons, motion.bodies)]
+                       height_m=person.height_m,
+                       head_m=person.height_m + body.pelvis_m[steps, 2] - person.sensor_height_m)
+            for person, body in zip(motion.persons, motion.bodies)]
 
 
 def _extras(people: int, motion: Motion, params: RoomParams, tracker: TrackerParams,
