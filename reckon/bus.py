@@ -308,16 +308,10 @@ class Subscription:
         self._ended = False
         self._running = len(selectors)  # drain threads still delivering
         self._undeclared = False
-        self._subscribers, self._threads = [], []
-        for one in selectors:  # several selectors (a union) share the one queue, each with its drain thread
-            try:
-                subscriber = session.declare_subscriber(one, zenoh.handlers.FifoChannel(fifo_capacity))
-            except zenoh.ZError as error:
-                for declared in self._subscribers:
-                    declared.undeclare()
-                raise BusError(f"cannot subscribe to {one!r}: {error}") from None
-            self._subscribers.append(subscriber)
-            handler = subscriber.handler  # taken now: the attribute is gone after undeclare
+        self._threads: list[threading.Thread] = []
+        # several selectors (a union) share the one queue, each with its drain thread
+        self._subscribers, handlers = _declare_fifos(session, selectors, fifo_capacity)
+        for one, handler in zip(selectors, handlers):
             self._threads.append(threading.Thread(target=self._drain, args=(handler,), daemon=True, name=f"drain {one}"))
         for thread in self._threads:
             thread.start()
@@ -395,6 +389,20 @@ class Subscription:
         self.close()
 
 
+def _declare_fifos(session: zenoh.Session, selectors: Sequence[str], fifo_capacity: int) -> tuple[list[Any], list[Any]]:
+    """A FIFO-handler subscriber per selector, and their handlers (taken now: the attribute is gone
+    after undeclare). BusError naming the selector if one cannot be declared (the others undeclared)."""
+    subscribers: list[Any] = []
+    for one in selectors:
+        try:
+            subscribers.append(session.declare_subscriber(one, zenoh.handlers.FifoChannel(fifo_capacity)))
+        except zenoh.ZError as error:
+            for declared in subscribers:
+                declared.undeclare()
+            raise BusError(f"cannot subscribe to {one!r}: {error}") from None
+    return subscribers, [subscriber.handler for subscriber in subscribers]
+
+
 class PolledSubscription:
     """Samples of `selector`, taken in batches on the consumer's own thread: no drain thread at all.
 
@@ -439,20 +447,10 @@ class PolledSubscription:
         self.stats = SubscriptionStats()
         self._fifo_capacity = fifo_capacity
         self._undeclared_at: float | None = None
-        self._subscribers: list[Any] = []
-        self._handlers: list[Any] = []  # taken at once: the attribute is gone after undeclare
         self._pending: deque[Received] = deque()  # taken from the FIFOs, not yet handed out
         self._run: dict[int, int] = {}  # per FIFO (by id): samples taken in a row without finding it empty
         self._last_data = -math.inf  # monotonic time of the last sweep that found something
-        for one in selectors:
-            try:
-                subscriber = session.declare_subscriber(one, zenoh.handlers.FifoChannel(fifo_capacity))
-            except zenoh.ZError as error:
-                for declared in self._subscribers:
-                    declared.undeclare()
-                raise BusError(f"cannot subscribe to {one!r}: {error}") from None
-            self._subscribers.append(subscriber)
-            self._handlers.append(subscriber.handler)
+        self._subscribers, self._handlers = _declare_fifos(session, selectors, fifo_capacity)
 
     def _sweep(self, limit: int) -> list[Received]:
         """What the FIFOs hold now, up to about `limit` samples."""
