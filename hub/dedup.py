@@ -66,6 +66,9 @@ class DedupSettings:
 
 
 _COUNTED = {"ImuBatch": "sequence", "CameraFrame": "frame", "SwimLength": "index"}
+# Types whose several streams share a key and a time, told apart by this field (named per type: a
+# getattr with a default on a protobuf message that lacks the field raises inside, 2 µs a call)
+_DISCRIMINATOR = {"BeaconSighting": "beacon_id", "PositionFix": "source_id", "Correction": "source_id"}
 
 
 class Deduplicator:
@@ -83,7 +86,8 @@ class Deduplicator:
             stream = (name, message.camera_id) if name == "CameraFrame" else (name, message.agent_id, message.sensor_id)
             verdict = self._check_counted(stream, int(getattr(message, field)))
         else:
-            discriminator = getattr(message, "beacon_id", "") or getattr(message, "source_id", "")
+            field = _DISCRIMINATOR.get(name)
+            discriminator = getattr(message, field) if field else ""
             verdict = self._check_timed((key, discriminator), int(message.timestamp_ns))
         if verdict is Verdict.DUPLICATE:
             self.counters.duplicates += 1
