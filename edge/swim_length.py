@@ -153,7 +153,8 @@ class RestGyro:
                 continue
             if self.count >= REST_MIN_S * rate_hz:
                 self.offset_dps = self.total / self.count
-            self.total, self.count = np.zeros(3), 0
+            self.total[:] = 0.0
+            self.count = 0
 
     def take(self) -> np.ndarray | None:
         offset, self.offset_dps = self.offset_dps, None

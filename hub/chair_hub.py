@@ -118,7 +118,8 @@ class AgentView:
     poses: int = 0
     extra: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)))  # covariance the edge is missing
     last_edge: tuple[int, float, float, int] | None = None  # (venue time, x, y, correction sequence) as sent
-    refused: dict[str, list] = field(default_factory=dict)  # source -> [(time, offset)] refused in a row
+    refused_source: str = ""  # the video source whose fixes were refused in a row, most recent last
+    refused: list = field(default_factory=list)  # ... as [(time, offset)]
 
     def pose_at(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """Live position and its covariance at `time_ns` (the last pose not after it)."""
@@ -322,7 +323,8 @@ class ChairHub:
             if kind != Kind.VIDEO or not self._relock(view, time_ns, shift, covariance, source):
                 self.counters.gated_out += 1
                 return []
-        view.refused.pop(source, None)
+        if source == view.refused_source:
+            view.refused.clear()
         return [self._send(view, time_ns, shift, covariance, kind, source=source)]
 
     def _relock(self, view: AgentView, time_ns: int, shift: np.ndarray, covariance: np.ndarray, source: str) -> bool:
@@ -332,11 +334,11 @@ class ChairHub:
         s = self.settings
         if s.relock_after <= 0:
             return False
-        runs = view.refused.setdefault(source, [])
+        if source != view.refused_source:  # "in a row": another source's refusals are another story
+            view.refused_source, view.refused = source, []
+        runs = view.refused
         runs.append((time_ns, shift))
         del runs[:-s.relock_after]
-        for other in [k for k in view.refused if k != source]:
-            del view.refused[other]  # "in a row": another source's refusals are another story
         if len(runs) < s.relock_after or time_ns - runs[0][0] > s.relock_within_s * 1e9:
             return False
         offsets = np.array([offset for _, offset in runs])
@@ -440,8 +442,8 @@ class ChairHub:
         expected = gain @ measured
         view.sequence += 1
         view.pending.append((view.sequence, expected))
-        after = (np.eye(2) - gain) @ prior
         keep = np.eye(2) - gain
+        after = keep @ prior
         honest_after = keep @ honest @ keep.T + gain @ covariance @ gain.T
         view.extra = _psd(honest_after - after)
         view.covariance = view.covariance.copy()

@@ -69,7 +69,6 @@ class IdentitySettings:
     fix_every_s: float = 1.0
     fix_cost: float = 0.6  # evidence needed to send a fix
     fix_after_s: float = 2.0  # ... held for this long
-    fix_scored: bool = True  # a fix is the position at the newest scored bin, not the newest frame
     track_timeout_s: float = 0.3  # a tracker reports every frame; one that comes back gets a new id anyway
     continue_max_s: float = 5.0  # a new track can continue an agent's track that broke off this long ago (0: never)
     continue_gate_m: float = 0.7  # ... if it starts this close to where the old track's motion leads
@@ -86,7 +85,6 @@ class IdentitySettings:
     max_lag_s: float = 0.5  # the camera's clock offset is searched within this much of lag_prior_s (an absolute bound)
     lag_prior_s: float = 0.0  # ... the configured offset (camera stamps minus venue time)
     lag_every_s: float = 5.0
-    lag_pedestrians: bool = False  # pedestrians' turn rates take part in the lag search (room: they do not separate)
     stature_weight: float = 4.0  # per bin, x how much worse the agent's motion matched tracks of this height (0: off)
     speed_sd_mps: float = 0.35
     yaw_sd_dps: float = 25.0
@@ -662,7 +660,7 @@ class IdentityEngine:
             self.seen_xy[i], self.seen_ns[i] = track.cues.latest_xy, track.cues.last_ns
             if evidence[row, i] > s.fix_cost or now_ns - track.held_since_ns < s.fix_after_s * 1e9:
                 continue
-            at = track.cues.at(scored_ns) if s.fix_scored else (track.cues.last_ns, track.cues.latest_xy)
+            at = track.cues.at(scored_ns)
             if at is None or at[0] - track.last_fix_ns < s.fix_every_s * 1e9:
                 continue
             fix_ns, xy = at
@@ -689,8 +687,8 @@ class IdentityEngine:
         within max_lag_s of the configured lag_prior_s (an absolute bound: successive moves never add up
         beyond it)."""
         s = self.settings
-        pairs = [(t, t.agent) for t in tracks if t.agent >= 0
-                 and (s.lag_pedestrians or self.kinds[t.agent] is not AgentKind.PEDESTRIAN)]
+        # chairs only: pedestrians' turn rates do not separate pairs (docs/identity.md, the room)
+        pairs = [(t, t.agent) for t in tracks if t.agent >= 0 and not self.is_pedestrian[t.agent]]
         if not pairs:
             return
         span = int(4.0 / BIN_S)
