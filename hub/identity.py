@@ -53,9 +53,12 @@ START_SD_M = 0.1  # a chair's edge starts its filter at the session's start posi
 
 @dataclass(frozen=True)
 class IdentitySettings:
-    hop_s: float = 0.5
-    delay_s: float = 0.6  # bins are scored this long after the camera saw them: the IMU has arrived by then
+    hop_s: float = 0.2  # 0.5 before the scoring waited for the agents' data (120 s games, seeds 1-3: docs/identity.md)
+    delay_s: float = 0.2  # bins are scored at least this long after the camera saw them, once every live agent's
+    max_delay_s: float = 1.0  # ... data has reached them, but never later than this (a silent device holds none back)
     forget_per_s: float = 0.7  # evidence half-life about 2 s: a tracker's swap is followed within seconds
+    fast_forget_per_s: float = 0.2  # ... and a fast mean (half-life 0.4 s) that overrides it where recent bins disagree
+    fast_margin: float = 0.5  # ... by more than this (0: a wrong pair claimed on a camera 0.2 s off, tests)
     pedestrian_forget_per_s: float = 0.8  # ... a pedestrian's (half-life 3.1 s): its cues are weak per bin, and a
     # room's tracker breaks tracks rather than swapping them
     prior_bins: float = 4.0  # a new pair starts with this many bins at prior_cost
@@ -88,6 +91,8 @@ class IdentitySettings:
     stature_weight: float = 4.0  # per bin, x how much worse the agent's motion matched tracks of this height (0: off)
     speed_sd_mps: float = 0.35
     yaw_sd_dps: float = 25.0
+    course_sd_deg: float = 15.0  # a moving track's direction against a chair's dead-reckoned one (0: off)
+    course_min_mps: float = 0.5  # ... compared only while both move at least this fast
     moving_sd: float = 0.7
     position_sd_m: float = 0.5  # beyond the camera's own error, for where an agent is expected
     walk_mps: float = 1.5  # how fast a pedestrian's expected position loses certainty when unseen
@@ -95,7 +100,7 @@ class IdentitySettings:
     position_clip: float = 4.0  # ... nor the hub's pose's (chairs): it can be wrong by metres, the motion cues not
 
     def __post_init__(self) -> None:
-        checks = {"hop_s": (0.1, 10.0), "delay_s": (0.0, 10.0), "forget_per_s": (0.01, 1.0),
+        checks = {"hop_s": (0.1, 10.0), "delay_s": (0.0, 10.0), "max_delay_s": (0.0, 10.0), "forget_per_s": (0.01, 1.0), "fast_forget_per_s": (0.0, 1.0), "fast_margin": (0.0, 100.0),
                   "pedestrian_forget_per_s": (0.01, 1.0), "prior_bins": (0.0, 1e3),
                   "nobody_cost": (0.0, 100.0), "claim_margin": (0.0, 100.0), "switch_margin": (0.0, 100.0),
                   "fix_every_s": (0.0, 3600.0), "track_timeout_s": (0.0, 60.0), "max_lag_s": (0.0, 5.0),
@@ -105,7 +110,7 @@ class IdentitySettings:
                   "encounter_keep": (0.0, 1.0), "share_m": (0.0, 100.0),
                   "speed_sd_mps": (1e-3, 10.0), "yaw_sd_dps": (1e-3, 1e3), "moving_sd": (1e-3, 10.0),
                   "position_sd_m": (1e-3, 100.0), "lag_prior_s": (-5.0, 5.0), "continue_height_m": (0.0, 10.0),
-                  "stature_weight": (0.0, 100.0)}
+                  "stature_weight": (0.0, 100.0), "course_sd_deg": (0.0, 180.0), "course_min_mps": (0.0, 10.0)}
         for name, (low, high) in checks.items():
             value = getattr(self, name)
             if not low <= value <= high:
@@ -115,7 +120,7 @@ class IdentitySettings:
 @dataclass
 class _Track:
     cues: TrackCues
-    cost_sum: np.ndarray  # per agent, forgetting sum of bin costs
+    cost_sum: np.ndarray  # (2, agents): forgetting sums of bin costs, slow (forget_per_s) and fast (fast_forget_per_s)
     cost_count: np.ndarray
     agent: int = -1
     held_since_ns: int = 0  # since when its identity is undisputed: held, and no encounter since
@@ -203,6 +208,7 @@ class IdentityEngine:
         self.lag_bins: dict[str, int] = {}
         self.counters = IdentityCounters()
         self.update_s: deque[float] = deque(maxlen=4096)  # wall time of the latest hops (reports, not control)
+        self.delays_s: deque[float] = deque(maxlen=4096)  # ... and how far behind the camera each scored
 
     # -- inputs ------------------------------------------------------------------------------
 
@@ -246,22 +252,33 @@ class IdentityEngine:
             key = (camera, int(track_id))
             track = self.tracks.get(key)
             if track is None:
-                track = self.tracks[key] = _Track(TrackCues(int(track_id)), np.zeros(len(self.agents)),
-                                                  np.zeros(len(self.agents)), born_ns=time_ns)
+                track = self.tracks[key] = _Track(TrackCues(int(track_id)), np.zeros((2, len(self.agents))),
+                                                  np.zeros((2, len(self.agents))), born_ns=time_ns)
                 self.counters.tracks += 1
                 new.append(key)
             track.cues.push(time_ns, float(x), float(y), float(height))
         out = self._continue(camera, new, time_ns) if new else []
         bin_now = time_ns // BIN_NS
         first = self.scored_until.setdefault(camera, bin_now)
-        end = bin_now - int(round(self.settings.delay_s / BIN_S))
+        end = self._scored_end(bin_now)
         if end - first < int(round(self.settings.hop_s / BIN_S)):
             return out
         self.scored_until[camera] = end
+        self.delays_s.append((bin_now - end) * BIN_S)
         started = time.perf_counter()
         out += self._update(camera, first, end, frame.position_sd_m, time_ns)
         self.update_s.append(time.perf_counter() - started)
         return out
+
+    def _scored_end(self, bin_now: int) -> int:
+        """The first bin not to score yet: at least delay_s back, and no further than every live agent's data has
+        reached (its cues are compared TRACK_DELAY_BINS earlier), but at most max_delay_s back. A bin scored
+        before an agent's data is in would count nothing for it, for good."""
+        s = self.settings
+        earliest, latest = bin_now - int(round(s.max_delay_s / BIN_S)), bin_now - int(round(s.delay_s / BIN_S))
+        ready = [a.complete_bin() + 1 + TRACK_DELAY_BINS for a in self.agents]
+        live = [bin_ for bin_ in ready if bin_ > earliest]
+        return max(earliest, min([latest] + live))
 
     # -- continuation: a track that breaks off and comes back under a new id ------------------
 
@@ -365,7 +382,7 @@ class IdentityEngine:
                 continue
             if len(live) and np.hypot(*(live - pose[0]).T).min() < s.continue_gate_m + 3.0 * pose[1]:
                 continue
-            zeros = np.zeros(len(self.agents))
+            zeros = np.zeros((2, len(self.agents)))
             out[i] = _Lost("", now_ns, np.asarray(pose[0], dtype=float), np.full(2, np.nan), zeros, zeros.copy())
         return out
 
@@ -395,19 +412,20 @@ class IdentityEngine:
         count = end - first
         agent_cues = self._agent_windows(first, count)
         costs = self._bin_costs(tracks, agent_cues, first, count, camera_sd_m)  # (T, A, bins), NaN = not comparable
-        forget = np.where(self.is_pedestrian, s.pedestrian_forget_per_s, s.forget_per_s) ** (count * BIN_S)
+        forget = np.stack([np.where(self.is_pedestrian, s.pedestrian_forget_per_s, s.forget_per_s),
+                           np.full(len(self.agents), s.fast_forget_per_s)]) ** (count * BIN_S)
         bins = np.arange(first, end)
         for row, track in enumerate(tracks):
             valid = np.isfinite(costs[row])
             if track.since_bin is not None:
                 valid &= bins[None, :] >= track.since_bin[:, None]
-            track.cost_sum = track.cost_sum * forget + np.where(valid, costs[row], 0.0).sum(axis=1)
-            track.cost_count = track.cost_count * forget + valid.sum(axis=1)
+            track.cost_sum = track.cost_sum * forget + np.where(valid, costs[row], 0.0).sum(axis=1)[None]
+            track.cost_count = track.cost_count * forget + valid.sum(axis=1)[None]
         self.counters.updates += 1
         work = len(tracks) * len(self.agents) * count
         self.counters.pair_bins += work
         self.counters.max_pair_bins = max(self.counters.max_pair_bins, work)
-        evidence = np.array([(t.cost_sum + s.prior_cost * s.prior_bins) / (t.cost_count + s.prior_bins) for t in tracks])
+        evidence = np.array([self._evidence(t) for t in tracks])
         out += self._assign(camera, keys, tracks, evidence, now_ns)
         out += self._fixes(camera, tracks, evidence, now_ns, camera_sd_m, end * BIN_NS)
         self._learn_speed(tracks, evidence, first, count)
@@ -415,6 +433,17 @@ class IdentityEngine:
             self.next_lag_bin[camera] = end + int(s.lag_every_s / BIN_S)
             self._search_lag(camera, tracks, end)
         return out
+
+    def _evidence(self, track: _Track) -> np.ndarray:
+        """Per agent: the slow mean of its bins' costs on this track (after the prior) or, where recent bins
+        disagree with it, the fast one's: a holder whose recent bins are bad loses the track sooner, and
+        an agent whose recent bins are good is not held back by bad ones from before (a merge, a crowd)."""
+        s = self.settings
+        means = (track.cost_sum + s.prior_cost * s.prior_bins) / (track.cost_count + s.prior_bins)
+        if s.fast_forget_per_s <= 0:
+            return means[0]
+        slow, fast = means
+        return np.minimum(slow, fast + s.fast_margin)
 
     def _encounters(self, gone: list[tuple[str, int]], keys: list[tuple[str, int]], first: int,
                     now_ns: int) -> list[tuple[int, tuple[str, int]]]:
@@ -467,8 +496,8 @@ class IdentityEngine:
             if t.encounter and first > t.close_bin:
                 for i in t.encounter:
                     keep = s.encounter_keep if i == t.agent else 0.0
-                    t.cost_sum[i] *= keep
-                    t.cost_count[i] *= keep
+                    t.cost_sum[:, i] *= keep
+                    t.cost_count[:, i] *= keep
                 t.encounter.clear()
                 self.counters.encounters += 1
                 for i in t.sharers:  # the merge is over: whoever shared it has no track until one is claimed
@@ -508,9 +537,9 @@ class IdentityEngine:
         in the paper's room)."""
         agents = {i for i in agents if self.is_chair[i]}
         for i in agents - track.encounter - {track.agent}:
-            track.cost_sum[i] = track.cost_count[i] = 0.0
+            track.cost_sum[:, i] = track.cost_count[:, i] = 0.0
             if track.since_bin is None:
-                track.since_bin = np.full(len(track.cost_sum), -(2**62), dtype=np.int64)
+                track.since_bin = np.full(len(self.agents), -(2**62), dtype=np.int64)
             track.since_bin[i] = last_bin  # bins still to be scored from before they met do not count either
         track.encounter |= agents | ({track.agent} if track.agent >= 0 and self.is_chair[track.agent] else set())
         track.close_bin = max(track.close_bin, last_bin)
@@ -524,7 +553,9 @@ class IdentityEngine:
         yaw = np.where(chair[:, None], b["yaw_dr"], b["yaw"])
         with np.errstate(invalid="ignore"):
             moving = np.where(np.isfinite(speed), speed > MOVING_MPS, np.nan)
-        return {"speed": speed, "yaw": yaw, "moving": moving}
+        nan = np.full_like(speed, np.nan)
+        return {"speed": speed, "yaw": yaw, "moving": moving, "vx": np.where(chair[:, None], b["vx_dr"], nan),
+                "vy": np.where(chair[:, None], b["vy_dr"], nan)}
 
     def _bin_costs(self, tracks: list[_Track], agent: dict[str, np.ndarray], first: int, count: int,
                    camera_sd_m: float) -> np.ndarray:
@@ -540,6 +571,8 @@ class IdentityEngine:
         parts = [normalised(t_speed, agent["speed"], s.speed_sd_mps),
                  normalised(t_moving, agent["moving"], s.moving_sd),
                  normalised(t_yaw, agent["yaw"], s.yaw_sd_dps)]
+        if s.course_sd_deg > 0:
+            parts.append(self._course_cost(cues["vx"], cues["vy"], agent["vx"], agent["vy"]))
         position = self._position_cost(tracks, t_x, t_y, first, count, camera_sd_m)
         if position is not None:
             parts.append(position)
@@ -551,9 +584,22 @@ class IdentityEngine:
         if s.stature_weight > 0 and np.isfinite(cues["height"]).any():
             motion = np.where(present[0], np.where(present[:3], stack[:3] - 1.0, 0.0).sum(axis=0), np.nan)
             stature = self.statures.cost(cues["height"])  # from the bins before these: a bin never judges itself
-            self.statures.learn(cues["height"], motion)
+            with np.errstate(invalid="ignore"):
+                self.statures.learn(cues["height"], motion, t_speed > MOVING_MPS)
             excess = excess + np.where(np.isfinite(stature), s.stature_weight * stature, 0.0)
         return np.where(present[0], excess, np.nan)
+
+    def _course_cost(self, t_vx: np.ndarray, t_vy: np.ndarray, a_vx: np.ndarray, a_vy: np.ndarray) -> np.ndarray:
+        """The angle between a track's velocity and an agent's dead-reckoned one, (tracks, agents, bins); NaN
+        unless both move. A chair's heading stays within a few degrees of the truth (docs/identity.md), so
+        its direction of travel is absolute: after a crossing the chairs leave in different directions."""
+        s = self.settings
+        tvx, tvy = t_vx[:, None, :], t_vy[:, None, :]
+        avx, avy = a_vx[None], a_vy[None]
+        angle = np.degrees(np.arctan2(tvx * avy - tvy * avx, tvx * avx + tvy * avy))
+        with np.errstate(invalid="ignore"):
+            moving = (np.hypot(tvx, tvy) > s.course_min_mps) & (np.hypot(avx, avy) > s.course_min_mps)
+        return np.where(moving, np.minimum((angle / s.course_sd_deg) ** 2, s.clip), np.nan)
 
     def _position_cost(self, tracks: list[_Track], t_x: np.ndarray, t_y: np.ndarray, first: int, count: int,
                        camera_sd_m: float) -> np.ndarray | None:

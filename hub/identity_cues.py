@@ -116,8 +116,9 @@ class StatureProfile:
     """How well each agent's motion has matched tracks of each reported head height, over the session.
 
     A camera that reports the head top's height sees each person at their own stature on every track
-    of theirs. Every scored bin of every live track (held or not: no feedback from the assignment)
-    adds the agent's motion cost (speed, moving, turn rate) to the cell of the track's height; over
+    of theirs while they walk (seated, the head is ~0.4 m lower). Every scored bin of every live track
+    that moves (held or not: no feedback from the assignment) adds the agent's motion cost (speed,
+    moving, turn rate) to the cell of the track's height; over
     minutes the agent's own stature collects the lowest mean cost, a bystander's or another wearer's
     a higher one. The cue is that mean cost, smoothed over heights, above its lowest value: ~0 for
     tracks at the agent's stature. Unsupervised and never from truth."""
@@ -136,9 +137,10 @@ class StatureProfile:
     def cells(self, height_m: np.ndarray) -> np.ndarray:
         return np.clip(np.round((height_m - self.LOW_M) / self.STEP_M), 0, self.CELLS - 1).astype(np.int64)
 
-    def learn(self, height_m: np.ndarray, motion: np.ndarray) -> None:
-        """height_m (tracks, bins); motion (tracks, agents, bins) excess cost, NaN where not compared."""
-        ok = np.isfinite(height_m)[:, None, :] & np.isfinite(motion)
+    def learn(self, height_m: np.ndarray, motion: np.ndarray, upright: np.ndarray) -> None:
+        """height_m (tracks, bins); motion (tracks, agents, bins) excess cost, NaN where not compared; upright
+        (tracks, bins): the track walks, so its head is at the person's stature (seated, it is ~0.4 m lower)."""
+        ok = (np.isfinite(height_m) & upright)[:, None, :] & np.isfinite(motion)
         if not ok.any():
             return
         t, a, k = np.nonzero(ok)
@@ -170,7 +172,7 @@ class StatureProfile:
 class AgentCues:
     """One agent's cues from its body IMU (pedestrian waist, chair seat) and, for chairs, its edge poses."""
 
-    NAMES = ("activity", "heading", "speed_dr", "heading_dr")
+    NAMES = ("activity", "heading", "speed_dr", "heading_dr", "vx_dr", "vy_dr")
 
     def __init__(self, agent_id: str, sensor_id: str, rate_hz: float):
         self.agent_id = agent_id
@@ -184,6 +186,13 @@ class AgentCues:
         self.ring = Ring(self.NAMES)
         self.last_pose: tuple[int, float, float, float] | None = None
         self.correction_sequence = 0
+        self.newest_imu_bin = NO_BIN  # the newest bins its data has reached (a bin is complete once a later one is)
+        self.newest_pose_bin = NO_BIN
+
+    def complete_bin(self) -> int:
+        """The newest bin whose cues are all in: both its IMU and, once poses come, its poses have passed it."""
+        newest = self.newest_imu_bin if self.newest_pose_bin == NO_BIN else min(self.newest_imu_bin, self.newest_pose_bin)
+        return newest - 1
 
     def push_imu(self, time_ns: np.ndarray, accel_g: np.ndarray, gyro_dps: np.ndarray) -> None:
         """Samples in venue time, in order; bins that end inside the batch get their values."""
@@ -203,6 +212,7 @@ class AgentCues:
         heading = self.heading_deg + np.cumsum(np.einsum("ij,ij->i", gyro_dps, unit)) * self.dt_s
         self.heading_deg = float(heading[-1])
         bins = time_ns // BIN_NS
+        self.newest_imu_bin = max(self.newest_imu_bin, int(bins[-1]))
         ends = np.flatnonzero(np.diff(np.append(bins, bins[-1] + 1)) != 0)  # last sample of each bin
         for i in ends:
             self.ring.put(int(bins[i]), activity=float(np.sqrt(max(power[i], 0.0))), heading=float(heading[i]))
@@ -212,6 +222,7 @@ class AgentCues:
 
         A pose that holds a new hub correction jumped there: it starts afresh rather than read the
         jump as speed."""
+        self.newest_pose_bin = max(self.newest_pose_bin, int(time_ns // BIN_NS))
         if correction_sequence != self.correction_sequence:
             self.correction_sequence = correction_sequence
             self.last_pose = None
@@ -222,8 +233,9 @@ class AgentCues:
                 return
             heading_rad = h0 + (heading_rad - h0 + np.pi) % (2 * np.pi) - np.pi
             if dt < 1.0:
-                self.ring.put(time_ns // BIN_NS, speed_dr=float(np.hypot(x_m - x0, y_m - y0) / dt),
-                              heading_dr=float(np.degrees(heading_rad)))
+                vx, vy = (x_m - x0) / dt, (y_m - y0) / dt
+                self.ring.put(time_ns // BIN_NS, speed_dr=float(np.hypot(vx, vy)), heading_dr=float(np.degrees(heading_rad)),
+                              vx_dr=float(vx), vy_dr=float(vy))
         self.last_pose = (time_ns, x_m, y_m, heading_rad)
 
 
@@ -314,17 +326,17 @@ def track_hop_cues(tracks: list[TrackCues], first_bin: int, count: int) -> dict[
     with np.errstate(invalid="ignore"):
         moving = (speed > MOVING_MPS) & (np.hypot(px, py) > MOVING_MPS)
     return {"speed": speed, "yaw": np.where(moving, angle / (TURN_BINS * BIN_S), np.nan), "x": now[:, 0], "y": now[:, 1],
-            "height": now[:, 4]}
+            "height": now[:, 4], "vx": vx, "vy": vy}
 
 
 def agent_hop_blocks(agents: list[AgentCues], first_bin: int, count: int, delay_bins: int) -> dict[str, np.ndarray]:
     """The agents' signals for track bins first..first+count-1, each (agents, count): `activity` at those
-    bins; `speed_dr`, `yaw_dr` (DR heading) and `yaw` (gyro heading) delay_bins earlier (turn rates over
-    TURN_BINS, as turn_rate)."""
+    bins; `speed_dr`, `vx_dr`, `vy_dr` (DR velocity), `yaw_dr` (DR heading) and `yaw` (gyro heading)
+    delay_bins earlier (turn rates over TURN_BINS, as turn_rate)."""
     start = first_bin - delay_bins
     blocks = np.stack([a.ring.block(start - TURN_BINS, TURN_BINS + delay_bins + count) for a in agents])
     now = blocks[:, :, TURN_BINS:TURN_BINS + count]
     before = blocks[:, :, :count]
     rate = 1.0 / (TURN_BINS * BIN_S)
-    return {"activity": blocks[:, 0, TURN_BINS + delay_bins:], "speed_dr": now[:, 2],
-            "yaw_dr": (now[:, 3] - before[:, 3]) * rate, "yaw": (now[:, 1] - before[:, 1]) * rate}
+    return {"activity": blocks[:, 0, TURN_BINS + delay_bins:], "speed_dr": now[:, 2], "vx_dr": now[:, 4],
+            "vy_dr": now[:, 5], "yaw_dr": (now[:, 3] - before[:, 3]) * rate, "yaw": (now[:, 1] - before[:, 1]) * rate}

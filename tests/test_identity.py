@@ -54,9 +54,12 @@ def test_identities_follow_a_switch_at_a_crossing_and_ignore_a_false_track():
     assert (holder_at(changes, "a", 5.5), holder_at(changes, "b", 5.5), holder_at(changes, "c", 5.5)) == (1, 2, 3)
     assert (holder_at(changes, "a", 10.0), holder_at(changes, "b", 10.0)) == (5, 4)  # within 4 s of the swap
     assert holder_at(changes, "a", 18.0) == 7 and holder_at(changes, "c", 29.0) == 3
-    # no wrong identity at any time
+    # no wrong identity at any time but a share: a's track ends at 14 s 0.3 m from c's, which is what a merge
+    # looks like from the tracks, so a shares c's track until a track of its own appears (14.5 s)
     truth = {1: "a", 2: "b", 3: "c", 4: "b", 5: "a", 7: "a"}
-    assert all(track == 0 or truth[track] == who for _, who, track in changes)
+    wrong = [(t, who, track) for t, who, track in changes if track and truth[track] != who]
+    assert all((who, track) == ("a", 3) and 14.0 <= t <= 14.5 for t, who, track in wrong)
+    assert engine.counters.shares >= len(wrong)
     assert engine.counters.fixes > 0
 
 
@@ -337,10 +340,14 @@ def test_the_stature_profile_learns_which_head_height_moves_like_each_agent():
         motion = np.empty((2, 2, 10))
         motion[0, 0], motion[1, 1] = rng.normal(-0.7, 0.5, (2, 10))
         motion[0, 1], motion[1, 0] = rng.normal(0.5, 0.8, (2, 10))
-        profile.learn(heights, motion)
-    cost = profile.cost(np.array([[1.62], [1.75], [np.nan]]))  # (tracks, agents, bins)
+        profile.learn(heights, motion, np.ones((2, 10), dtype=bool))
+        # agent 0 also sits now and then (head 0.4 m lower, still matching its motion): a still track,
+        # whose height is not its stature, teaches nothing
+        profile.learn(np.full((1, 10), 1.22), rng.normal(-0.7, 0.5, (1, 2, 10)), np.zeros((1, 10), dtype=bool))
+    cost = profile.cost(np.array([[1.62], [1.75], [np.nan], [1.22]]))  # (tracks, agents, bins)
     assert cost[0, 0, 0] < 0.1 and cost[1, 1, 0] < 0.1  # each agent's own height: about its lowest cost
     assert cost[1, 0, 0] > 0.6 and cost[0, 1, 0] > 0.6  # the other's
+    assert cost[3, 0, 0] > 0.3  # the seated height was never learnt as agent 0's: nearer its mean than its lowest
     assert np.isnan(cost[2]).all()  # a track without a height gets no stature cue
     assert np.isnan(StatureProfile(2).cost(np.array([[1.62]]))).all()  # nothing learnt yet: no cue
 
@@ -363,3 +370,69 @@ def test_the_camera_lag_stays_within_its_bound_of_the_prior_however_the_searches
     engine, _ = _run_scene(long, list(long), tracks, 40, chairs=True, camera_shift_s=0.9,
                            settings=IdentitySettings(lag_prior_s=0.7))
     assert abs(engine.lag_bins["cam1"] - 9) <= 2  # 0.7 s prior; the true 0.9 s found within 0.2 s
+
+
+def test_a_chairs_direction_of_travel_tells_two_chairs_of_one_speed_apart():
+    """Two chairs at the same speed, one going +x and one +y: speed, moving and turn rate cannot tell their
+    tracks apart, the direction of the edge's dead-reckoned velocity can (its heading stays within a few
+    degrees: docs/identity.md). Slow bins give no direction."""
+    from identity_scenes import edge_poses
+
+    times = np.arange(0, 4, 0.01)
+    paths = {"a": np.column_stack([1.0 + 1.5 * times, np.full_like(times, 1.0)]),
+             "b": np.column_stack([np.full_like(times, 1.0), 1.0 + 1.5 * times])}
+    engine = IdentityEngine(session(list(paths), chairs=True))
+    for agent, xy in paths.items():
+        for _, pose in edge_poses(agent, times, xy, (0.0, 0.0)):
+            engine.on_message(pose)
+    blocks = engine._agent_windows(20, 10)  # bins 2.0-2.9 s
+    track_v = np.array([[1.5, 0.0], [0.0, 1.5], [0.2, 0.0]])  # a's direction, b's, and a slow track
+    tvx = np.repeat(track_v[:, :1], 10, axis=1)
+    tvy = np.repeat(track_v[:, 1:], 10, axis=1)
+    cost = engine._course_cost(tvx, tvy, blocks["vx"], blocks["vy"])  # (tracks, agents, bins)
+    assert cost[0, 0].max() < 0.1 and cost[1, 1].max() < 0.1  # the right pairs: the same direction
+    assert cost[0, 1].min() == cost[1, 0].min() == engine.settings.clip  # 90 degrees apart: clipped at 3 sigma
+    assert np.isnan(cost[2]).all()  # too slow to have a direction
+
+
+def test_bins_are_scored_once_every_live_agents_data_is_in_and_a_silent_device_holds_none_back():
+    """IMU batches that arrive 0.5 s late (after 2 s on time, from which the hub learnt the clock offsets) make
+    the engine score later (a bin scored before an agent's data is in would count nothing for it, for good)
+    and the identities still come; a device that falls silent holds the scoring back by at most max_delay_s."""
+    tracks = [(1, "a", 0, 30), (2, "b", 0, 30), (3, "c", 0, 30)]
+
+    def scored(late_s: float, silent_after_s: float, settings: IdentitySettings = IdentitySettings()
+               ) -> tuple[list[tuple[float, float]], list]:
+        rng = np.random.default_rng(1)
+        events = []
+        for p, (t, xy) in CROSSING.items():
+            for arrival, batch in imu_batches(p, t, xy, rng):
+                if p == "c" and arrival > silent_after_s * S:
+                    continue
+                batch.received_ns = arrival + int(late_s * S) * (arrival > 2 * S)
+                events.append((batch.received_ns, batch))
+        events += camera_frames(CROSSING, tracks, rng, end_s=30)
+        events.sort(key=lambda e: e[0])
+        engine = IdentityEngine(session(list(CROSSING)), settings)
+        delays, changes = [], []
+        for _, message in events:
+            hops = len(engine.delays_s)
+            for out in engine.on_message(message):
+                if out.DESCRIPTOR.name == "TrackIdentity":
+                    changes.append((out.timestamp_ns / S, out.agent_id, out.track_id))
+            if len(engine.delays_s) > hops:
+                delays.append((message.timestamp_ns / S, engine.delays_s[-1]))
+        return delays, changes
+
+    delays, changes = scored(0.5, 99.0)
+    assert all(0.3 - 1e-9 <= d <= engine_max() for t, d in delays if t > 3.0)  # an agent's cues are compared 0.2 s earlier
+    assert (holder_at(changes, "a", 5.5), holder_at(changes, "b", 5.5), holder_at(changes, "c", 5.5)) == (1, 2, 3)
+    _, fixed = scored(0.5, 99.0, IdentitySettings(max_delay_s=0.2))  # scoring at 0.2 s whatever has arrived
+    assert not [change for change in fixed if change[0] > 3.0]  # compares nothing after 2 s: no identity comes
+    delays, _ = scored(0.0, 10.0)
+    assert all(d <= 0.5 for t, d in delays if t < 10.0)
+    assert all(d <= engine_max() for t, d in delays) and all(d <= 0.5 for t, d in delays if t > 12.0)
+
+
+def engine_max() -> float:
+    return IdentitySettings().max_delay_s + 1e-9

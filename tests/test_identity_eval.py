@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -22,16 +23,22 @@ def test_identity_table_scores_both_methods_from_a_session_log(tmp_path: Path):
     assert set(data.cameras) == {"cam1"} and data.cameras["cam1"].person_id is not None
     report = evaluate_identity(data, path)
     by_method = to_json(report)
-    assert [row["method"] for row in by_method] == ["reckon", "reckon", "paper"]
-    live, refined, paper = by_method
+    assert [row["method"] for row in by_method] == ["reckon", "reckon", "ceiling", "paper"]
+    live, refined, ceiling, paper = by_method
     for row in by_method:
         assert row["agents"] == 3
         assert 0.0 <= row["time_correct_pct"] <= 100.0 and 0.0 <= row["idf1"] <= 1.0
-        assert row["update_ms_p99"] > 0
+        assert (row["update_ms_p99"] is None) if row["method"] == "ceiling" else row["update_ms_p99"] > 0
         # every visible frame not correct has one cause
         assert sum(row["lost_pct"].values()) + row["time_correct_pct"] == pytest.approx(100.0, abs=0.05)
     # the live identity starts late (evidence first) and back-filling can only add correct time
     assert live["time_correct_pct"] < refined["time_correct_pct"]
     assert refined["time_correct_pct"] >= 95.0
     assert paper["note"].startswith("6 of 6 permutations")
+    # the ceiling waits the engine's median delay after each track starts showing a person: a at 0, 6 and
+    # 14.5 s, b at 0 and 6 s, c at 0 s; visible: a 29.5 s (gone 14-14.5 s), b and c 30 s
+    delay_s = float(re.search(r"for a person ([0-9.]+) s after", ceiling["note"]).group(1))
+    assert 0.2 <= delay_s <= 1.0
+    assert ceiling["time_correct_pct"] == pytest.approx(100.0 * (1 - 6 * delay_s / 89.5), abs=0.3)
+    assert ceiling["lost_pct"]["no track: its track in its first 1.5 s"] == pytest.approx(100 - ceiling["time_correct_pct"])
     assert "time correct" in to_table(report) and "lost: wrong track" in to_table(report)

@@ -27,6 +27,7 @@ import numpy as np
 
 from hub.chair_hub import HubSettings
 from hub.clocks import ClockOffsets
+from hub.identity import IdentitySettings
 from hub.track_paper import identify
 from hub.track_paper_fragments import training_pairs
 from hub.track_paper_features import PaperModel, fit_model, vertical_acceleration
@@ -75,7 +76,9 @@ def evaluate_identity(data: SessionData, path: Path, progress: Callable[[str], N
     agents = [a.id for a in data.session.agents if _body_sensor(a) is not None]
     arrivals = arrivals if arrivals is not None else log_inputs(path)
     progress("identity: ours (the hub's engine over the log)")
-    report.rows += _ours(data, arrivals, agents)
+    rows, delay_s = _ours(data, arrivals, agents)
+    report.rows += rows
+    report.rows.append(_ceiling(data, agents, delay_s))
     progress("identity: the paper's permutations")
     report.rows.append(_paper(data, arrivals, agents, report.notes))
     return report
@@ -88,7 +91,8 @@ def _body_sensor(agent: Any) -> Any:
 # -- ours ---------------------------------------------------------------------------------------
 
 
-def _ours(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]) -> list[IdentityRow]:
+def _ours(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]) -> tuple[list[IdentityRow], float]:
+    """(live, refined) rows, and the median delay at which the engine scored the camera's bins."""
     identities: list[Any] = []
     hub, _, _ = run_lockstep(data.session, arrivals, HubSettings(corrections=frozenset({"camera"})), identities)
     held: dict[str, list[tuple[int, str, int]]] = {a: [] for a in agents}
@@ -108,7 +112,8 @@ def _ours(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str])
     hindsight = _score("reckon", data, agents, refined)
     hindsight.update_ms_p99 = live.update_ms_p99
     hindsight.note = "refined: a track's identity also holds back to where the track began (offline, like the paper)"
-    return [live, hindsight]
+    delays = hub.identity.delays_s if hub.identity is not None else ()
+    return [live, hindsight], float(np.median(delays)) if len(delays) else IdentitySettings().delay_s
 
 
 def _back_filled(held: dict[str, np.ndarray], tracks: CameraTracks) -> dict[str, np.ndarray]:
@@ -141,6 +146,34 @@ def _held_at(changes: list[tuple[int, str, int]], camera: str, frame_ns: np.ndar
     tracks = np.array([track for _, track in mine], dtype=np.int64)
     index = np.searchsorted(times, frame_ns, side="right") - 1
     return np.where(index >= 0, tracks[np.maximum(index, 0)], 0)
+
+
+def _ceiling(data: SessionData, agents: list[str], latency_s: float) -> IdentityRow:
+    """What identifying from motion can reach live at best: an oracle that knows who every track shows,
+    but names a track for a person only once it has shown them for `latency_s` (our engine's median
+    delay: it scores a camera bin once the agents' data for it has arrived, and then still needs
+    evidence). Each birth, swap or merge of the tracker costs it latency_s per person involved."""
+    assignment: dict[str, dict[str, np.ndarray]] = {}
+    for camera, tracks in data.cameras.items():
+        if tracks.person_id is None:
+            continue
+        held = {a: np.zeros(len(tracks.frame_ns), dtype=np.int64) for a in agents}
+        since: dict[tuple[int, str], int] = {}  # (track, person) -> first frame of its current run
+        frame_of_row = np.searchsorted(tracks.frame_ns, tracks.time_ns)
+        starts = np.searchsorted(frame_of_row, np.arange(len(tracks.frame_ns)))
+        ends = np.searchsorted(frame_of_row, np.arange(len(tracks.frame_ns)), side="right")
+        for f, frame_ns in enumerate(tracks.frame_ns):
+            shown = {(int(tracks.track_id[r]), a) for r in range(starts[f], ends[f])
+                     for a in str(tracks.person_id[r]).split("+") if a}
+            since = {pair: since.get(pair, int(frame_ns)) for pair in shown}
+            for (track, a), first_ns in since.items():
+                if a in held and frame_ns - first_ns >= latency_s * 1e9 and held[a][f] == 0:
+                    held[a][f] = track
+        assignment[camera] = held
+    row = _score(f"ceiling", data, agents, assignment)
+    row.note = (f"an oracle that names a track for a person {latency_s:.1f} s after it starts showing them "
+                "(the engine's median delay): the most motion evidence can reach live")
+    return row
 
 
 # -- the paper ----------------------------------------------------------------------------------
