@@ -93,6 +93,8 @@ class IdentitySettings:
     yaw_sd_dps: float = 25.0
     course_sd_deg: float = 15.0  # a moving track's direction against a chair's dead-reckoned one (0: off)
     course_min_mps: float = 0.5  # ... compared only while both move at least this fast
+    course_prior_bins: float = 10.0  # ... less the pair's usual angle, which starts at 0 with this weight in bins
+    course_forget_per_s: float = 0.8  # ... and forgets at this rate (half-life 3 s)
     moving_sd: float = 0.7
     position_sd_m: float = 0.5  # beyond the camera's own error, for where an agent is expected
     walk_mps: float = 1.5  # how fast a pedestrian's expected position loses certainty when unseen
@@ -110,7 +112,8 @@ class IdentitySettings:
                   "encounter_keep": (0.0, 1.0), "share_m": (0.0, 100.0),
                   "speed_sd_mps": (1e-3, 10.0), "yaw_sd_dps": (1e-3, 1e3), "moving_sd": (1e-3, 10.0),
                   "position_sd_m": (1e-3, 100.0), "lag_prior_s": (-5.0, 5.0), "continue_height_m": (0.0, 10.0),
-                  "stature_weight": (0.0, 100.0), "course_sd_deg": (0.0, 180.0), "course_min_mps": (0.0, 10.0)}
+                  "stature_weight": (0.0, 100.0), "course_sd_deg": (0.0, 180.0), "course_min_mps": (0.0, 10.0),
+                  "course_prior_bins": (0.0, 1e4), "course_forget_per_s": (0.01, 1.0)}
         for name, (low, high) in checks.items():
             value = getattr(self, name)
             if not low <= value <= high:
@@ -130,6 +133,7 @@ class _Track:
     since_bin: np.ndarray | None = None  # per agent, the first bin that counts (bins before it showed someone else)
     sharers: set[int] = field(default_factory=set)  # agents whose track merged into this one (it shows them too)
     born_ns: int = 0
+    course: np.ndarray | None = None  # (cos, sin) x agents: forgetting sums of the angle track - agent direction
 
 
 @dataclass
@@ -142,13 +146,14 @@ class _Lost:
     cost_sum: np.ndarray
     cost_count: np.ndarray
     height_m: float = float("nan")  # the old track's reported head height (NaN: the tracker reports none)
+    course: np.ndarray | None = None
 
     @classmethod
     def of(cls, camera: str, track: _Track) -> _Lost:
         last_bin = track.cues.last_ns // BIN_NS
         velocity = np.array([track.cues.ring.window(name, last_bin, 1)[0] for name in ("vx", "vy")])
         return cls(camera, track.cues.last_ns, track.cues.latest_xy.copy(), velocity, track.cost_sum.copy(),
-                   track.cost_count.copy(), track.cues.height())
+                   track.cost_count.copy(), track.cues.height(), None if track.course is None else track.course.copy())
 
 
 @dataclass
@@ -338,6 +343,7 @@ class IdentityEngine:
                 self.tracks[holders[i]].agent = -1  # its drop, later, says nothing: the new identity replaces it
             track = self.tracks[key]
             track.cost_sum, track.cost_count = lost.cost_sum.copy(), lost.cost_count.copy()
+            track.course = None if lost.course is None else lost.course.copy()
             track.agent, track.held_since_ns = i, now_ns
             self.lost.pop(i, None)
             self._unshare(i)
@@ -498,6 +504,8 @@ class IdentityEngine:
                     keep = s.encounter_keep if i == t.agent else 0.0
                     t.cost_sum[:, i] *= keep
                     t.cost_count[:, i] *= keep
+                    if t.course is not None and i != t.agent:  # the holder's usual angle is its chair's heading error
+                        t.course[:, i] = 0.0
                 t.encounter.clear()
                 self.counters.encounters += 1
                 for i in t.sharers:  # the merge is over: whoever shared it has no track until one is claimed
@@ -538,6 +546,8 @@ class IdentityEngine:
         agents = {i for i in agents if self.is_chair[i]}
         for i in agents - track.encounter - {track.agent}:
             track.cost_sum[:, i] = track.cost_count[:, i] = 0.0
+            if track.course is not None:
+                track.course[:, i] = 0.0
             if track.since_bin is None:
                 track.since_bin = np.full(len(self.agents), -(2**62), dtype=np.int64)
             track.since_bin[i] = last_bin  # bins still to be scored from before they met do not count either
@@ -572,7 +582,7 @@ class IdentityEngine:
                  normalised(t_moving, agent["moving"], s.moving_sd),
                  normalised(t_yaw, agent["yaw"], s.yaw_sd_dps)]
         if s.course_sd_deg > 0:
-            parts.append(self._course_cost(cues["vx"], cues["vy"], agent["vx"], agent["vy"]))
+            parts.append(self._course_cost(tracks, cues["vx"], cues["vy"], agent["vx"], agent["vy"], count))
         position = self._position_cost(tracks, t_x, t_y, first, count, camera_sd_m)
         if position is not None:
             parts.append(position)
@@ -589,17 +599,33 @@ class IdentityEngine:
             excess = excess + np.where(np.isfinite(stature), s.stature_weight * stature, 0.0)
         return np.where(present[0], excess, np.nan)
 
-    def _course_cost(self, t_vx: np.ndarray, t_vy: np.ndarray, a_vx: np.ndarray, a_vy: np.ndarray) -> np.ndarray:
-        """The angle between a track's velocity and an agent's dead-reckoned one, (tracks, agents, bins); NaN
-        unless both move. A chair's heading stays within a few degrees of the truth (docs/identity.md), so
-        its direction of travel is absolute: after a crossing the chairs leave in different directions."""
+    def _course_cost(self, tracks: list[_Track], t_vx: np.ndarray, t_vy: np.ndarray, a_vx: np.ndarray,
+                     a_vy: np.ndarray, count: int) -> np.ndarray:
+        """The angle between a track's velocity and an agent's dead-reckoned one, less the pair's usual angle,
+        (tracks, agents, bins); NaN unless both move. A chair's heading mostly stays within a few degrees of
+        the truth (docs/identity.md), so its direction of travel is nearly absolute: after a crossing the
+        chairs leave in different directions. But a knock can turn it by 20 deg for a minute, and then its
+        own track would look wrong and never be claimed back (a 317 s game: its pose 2-6 m off for 60 s).
+        So each pair learns its usual angle (a forgetting circular mean, shrunk towards 0 by
+        course_prior_bins): steady for the right pair, wandering for a wrong one. Scored against the
+        angle learnt from the bins before these (a bin never judges itself)."""
         s = self.settings
         tvx, tvy = t_vx[:, None, :], t_vy[:, None, :]
         avx, avy = a_vx[None], a_vy[None]
-        angle = np.degrees(np.arctan2(tvx * avy - tvy * avx, tvx * avx + tvy * avy))
+        angle = np.arctan2(tvx * avy - tvy * avx, tvx * avx + tvy * avy)  # rad, (T, A, bins)
         with np.errstate(invalid="ignore"):
             moving = (np.hypot(tvx, tvy) > s.course_min_mps) & (np.hypot(avx, avy) > s.course_min_mps)
-        return np.where(moving, np.minimum((angle / s.course_sd_deg) ** 2, s.clip), np.nan)
+        forget = s.course_forget_per_s ** (count * BIN_S)
+        usual = np.empty((len(tracks), angle.shape[1]))
+        for row, track in enumerate(tracks):
+            if track.course is None:
+                track.course = np.zeros((2, angle.shape[1]))
+            usual[row] = np.arctan2(track.course[1], s.course_prior_bins + track.course[0])
+            ok = moving[row]
+            track.course = track.course * forget + np.stack([np.where(ok, np.cos(angle[row]), 0.0).sum(axis=1),
+                                                             np.where(ok, np.sin(angle[row]), 0.0).sum(axis=1)])
+        residual = np.degrees((angle - usual[:, :, None] + np.pi) % (2 * np.pi) - np.pi)
+        return np.where(moving, np.minimum((residual / s.course_sd_deg) ** 2, s.clip), np.nan)
 
     def _position_cost(self, tracks: list[_Track], t_x: np.ndarray, t_y: np.ndarray, first: int, count: int,
                        camera_sd_m: float) -> np.ndarray | None:

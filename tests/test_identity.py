@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hub.identity import IdentityEngine, IdentitySettings
+from hub.identity import IdentityEngine, IdentitySettings, _Track
 from identity_scenes import S, camera_frames, imu_batches, session, waypoints_path
 
 
@@ -389,7 +389,7 @@ def test_a_chairs_direction_of_travel_tells_two_chairs_of_one_speed_apart():
     track_v = np.array([[1.5, 0.0], [0.0, 1.5], [0.2, 0.0]])  # a's direction, b's, and a slow track
     tvx = np.repeat(track_v[:, :1], 10, axis=1)
     tvy = np.repeat(track_v[:, 1:], 10, axis=1)
-    cost = engine._course_cost(tvx, tvy, blocks["vx"], blocks["vy"])  # (tracks, agents, bins)
+    cost = engine._course_cost([_Track(None, None, None) for _ in range(3)], tvx, tvy, blocks["vx"], blocks["vy"], 10)
     assert cost[0, 0].max() < 0.1 and cost[1, 1].max() < 0.1  # the right pairs: the same direction
     assert cost[0, 1].min() == cost[1, 0].min() == engine.settings.clip  # 90 degrees apart: clipped at 3 sigma
     assert np.isnan(cost[2]).all()  # too slow to have a direction
