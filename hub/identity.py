@@ -49,6 +49,7 @@ from protocol.messages import CorrectionKind
 from protocol.session import AgentKind, Mount, Session
 
 METHOD = "reckon"
+SEATED_DROP_M = (0.33, 0.38, 0.43)  # a seated head below the stature: seat + sitting height ~0.52 x stature (docs/simulator-room.md)
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,7 @@ class IdentitySettings:
     lag_prior_s: float = 0.0  # ... the configured offset (camera stamps minus venue time)
     lag_every_s: float = 5.0
     stature_weight: float = 4.0  # per bin, x how much worse the agent's motion matched tracks of this height (0: off)
+    seated_tilt_deg: float = 5.0  # ... except for an agent whose waist leans this far from walking upright (seated)
     speed_sd_mps: float = 0.35
     yaw_sd_dps: float = 25.0
     course_sd_deg: float = 15.0  # a moving track's direction against a chair's dead-reckoned one (0: off)
@@ -112,7 +114,7 @@ class IdentitySettings:
                   "encounter_keep": (0.0, 1.0), "share_m": (0.0, 100.0),
                   "speed_sd_mps": (1e-3, 10.0), "yaw_sd_dps": (1e-3, 1e3), "moving_sd": (1e-3, 10.0),
                   "position_sd_m": (1e-3, 100.0), "lag_prior_s": (-5.0, 5.0), "continue_height_m": (0.0, 10.0),
-                  "stature_weight": (0.0, 100.0), "course_sd_deg": (0.0, 180.0), "course_min_mps": (0.0, 10.0),
+                  "stature_weight": (0.0, 100.0), "seated_tilt_deg": (0.0, 90.0), "course_sd_deg": (0.0, 180.0), "course_min_mps": (0.0, 10.0),
                   "course_prior_bins": (0.0, 1e4), "course_forget_per_s": (0.01, 1.0)}
         for name, (low, high) in checks.items():
             value = getattr(self, name)
@@ -309,7 +311,7 @@ class IdentityEngine(TrackRules):
         with np.errstate(invalid="ignore"):
             moving = np.where(np.isfinite(speed), speed > MOVING_MPS, np.nan)
         nan = np.full_like(speed, np.nan)
-        return {"speed": speed, "yaw": yaw, "moving": moving, "vx": np.where(chair[:, None], b["vx_dr"], nan),
+        return {"speed": speed, "yaw": yaw, "moving": moving, "tilt": b["tilt"], "vx": np.where(chair[:, None], b["vx_dr"], nan),
                 "vy": np.where(chair[:, None], b["vy_dr"], nan)}
 
     def _bin_costs(self, tracks: list[_Track], agent: dict[str, np.ndarray], first: int, count: int,
@@ -326,7 +328,7 @@ class IdentityEngine(TrackRules):
         parts = [normalised(t_speed, agent["speed"], s.speed_sd_mps),
                  normalised(t_moving, agent["moving"], s.moving_sd),
                  normalised(t_yaw, agent["yaw"], s.yaw_sd_dps)]
-        if s.course_sd_deg > 0:
+        if s.course_sd_deg > 0 and np.isfinite(agent["vx"]).any():  # only agents with dead reckoning (chairs) have one
             parts.append(self._course_cost(tracks, cues["vx"], cues["vy"], agent["vx"], agent["vy"], count))
         position = self._position_cost(tracks, t_x, t_y, first, count, camera_sd_m)
         if position is not None:
@@ -339,6 +341,11 @@ class IdentityEngine(TrackRules):
         if s.stature_weight > 0 and np.isfinite(cues["height"]).any():
             motion = np.where(present[0], np.where(present[:3], stack[:3] - 1.0, 0.0).sum(axis=0), np.nan)
             stature = self.statures.cost(cues["height"])  # from the bins before these: a bin never judges itself
+            with np.errstate(invalid="ignore"):
+                seated = agent["tilt"] > s.seated_tilt_deg  # its head is ~0.35-0.4 m below its stature
+            if seated.any():
+                risen = np.fmin.reduce([self.statures.cost(cues["height"] + drop) for drop in SEATED_DROP_M])
+                stature = np.where(seated[None], risen, stature)
             with np.errstate(invalid="ignore"):
                 self.statures.learn(cues["height"], motion, t_speed > MOVING_MPS)
             excess = excess + np.where(np.isfinite(stature), s.stature_weight * stature, 0.0)

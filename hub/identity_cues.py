@@ -35,6 +35,9 @@ TRACK_FIT_S = 0.5  # a track's velocity: line fit over its last half second of p
 TRACK_DELAY_BINS = 2  # ... so it describes the motion about a quarter second ago
 TURN_BINS = 5  # turn rates over half a second: the pelvis' rotation at the step frequency averages out
 NO_BIN = -(2**62)
+WALKING_G = 0.08  # the waist's vertical activity (RMS) above this is walking: upright
+UPRIGHT_S = 2.0  # walking needed before the upright direction is known
+UPRIGHT_FORGET = 0.9999  # per sample: the upright direction is remembered for a few minutes
 
 
 class Ring:
@@ -172,7 +175,7 @@ class StatureProfile:
 class AgentCues:
     """One agent's cues from its body IMU (pedestrian waist, chair seat) and, for chairs, its edge poses."""
 
-    NAMES = ("activity", "heading", "speed_dr", "heading_dr", "vx_dr", "vy_dr")
+    NAMES = ("activity", "heading", "speed_dr", "heading_dr", "vx_dr", "vy_dr", "tilt")
 
     def __init__(self, agent_id: str, sensor_id: str, rate_hz: float):
         self.agent_id = agent_id
@@ -186,6 +189,7 @@ class AgentCues:
         self.ring = Ring(self.NAMES)
         self.last_pose: tuple[int, float, float, float] | None = None
         self.correction_sequence = 0
+        self.upright = np.zeros(3)  # forgetting sum of the gravity direction (sensor frame) while walking
         self.newest_imu_bin = NO_BIN  # the newest bins its data has reached (a bin is complete once a later one is)
         self.newest_pose_bin = NO_BIN
 
@@ -211,11 +215,24 @@ class AgentCues:
         power, self.state["activity"] = lfilter(b, a, vertical * vertical, zi=self.state["activity"])
         heading = self.heading_deg + np.cumsum(np.einsum("ij,ij->i", gyro_dps, unit)) * self.dt_s
         self.heading_deg = float(heading[-1])
+        tilt = self._tilt(unit, np.sqrt(np.maximum(power, 0.0)))
         bins = time_ns // BIN_NS
         self.newest_imu_bin = max(self.newest_imu_bin, int(bins[-1]))
         ends = np.flatnonzero(np.diff(np.append(bins, bins[-1] + 1)) != 0)  # last sample of each bin
         for i in ends:
-            self.ring.put(int(bins[i]), activity=float(np.sqrt(max(power[i], 0.0))), heading=float(heading[i]))
+            self.ring.put(int(bins[i]), activity=float(np.sqrt(max(power[i], 0.0))), heading=float(heading[i]),
+                          tilt=float(tilt[i]))
+
+    def _tilt(self, unit: np.ndarray, activity_g: np.ndarray) -> np.ndarray:
+        """Degrees between each sample's gravity direction and the one while walking (learnt here, NaN until
+        UPRIGHT_S of walking): seated, the pelvis tilts back ~10-20 deg and the belt sensor with it."""
+        walking = activity_g > WALKING_G
+        keep = UPRIGHT_FORGET ** len(unit)
+        self.upright = self.upright * keep + unit[walking].sum(axis=0)
+        norm = float(np.linalg.norm(self.upright))
+        if norm < UPRIGHT_S / self.dt_s * 0.5:
+            return np.full(len(unit), np.nan)
+        return np.degrees(np.arccos(np.clip(unit @ (self.upright / norm), -1.0, 1.0)))
 
     def push_pose(self, time_ns: int, x_m: float, y_m: float, heading_rad: float, correction_sequence: int = 0) -> None:
         """A dead-reckoned pose (venue time): speed since the previous one, and the heading (unwrapped).
@@ -331,12 +348,13 @@ def track_hop_cues(tracks: list[TrackCues], first_bin: int, count: int) -> dict[
 
 def agent_hop_blocks(agents: list[AgentCues], first_bin: int, count: int, delay_bins: int) -> dict[str, np.ndarray]:
     """The agents' signals for track bins first..first+count-1, each (agents, count): `activity` at those
-    bins; `speed_dr`, `vx_dr`, `vy_dr` (DR velocity), `yaw_dr` (DR heading) and `yaw` (gyro heading)
+    bins, and `tilt` (deg from upright, the waist); `speed_dr`, `vx_dr`, `vy_dr` (DR velocity), `yaw_dr` (DR heading) and `yaw` (gyro heading)
     delay_bins earlier (turn rates over TURN_BINS, as turn_rate)."""
     start = first_bin - delay_bins
     blocks = np.stack([a.ring.block(start - TURN_BINS, TURN_BINS + delay_bins + count) for a in agents])
     now = blocks[:, :, TURN_BINS:TURN_BINS + count]
     before = blocks[:, :, :count]
     rate = 1.0 / (TURN_BINS * BIN_S)
-    return {"activity": blocks[:, 0, TURN_BINS + delay_bins:], "speed_dr": now[:, 2], "vx_dr": now[:, 4],
+    return {"activity": blocks[:, 0, TURN_BINS + delay_bins:], "tilt": blocks[:, 6, TURN_BINS + delay_bins:],
+            "speed_dr": now[:, 2], "vx_dr": now[:, 4],
             "vy_dr": now[:, 5], "yaw_dr": (now[:, 3] - before[:, 3]) * rate, "yaw": (now[:, 1] - before[:, 1]) * rate}

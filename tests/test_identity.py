@@ -436,3 +436,27 @@ def test_bins_are_scored_once_every_live_agents_data_is_in_and_a_silent_device_h
 
 def engine_max() -> float:
     return IdentitySettings().max_delay_s + 1e-9
+
+
+def test_the_waist_tells_seated_from_upright_by_its_tilt_from_how_it_walks():
+    """The belt sensor's gravity direction while walking is upright; seated, the pelvis tilts back (~10-20
+    deg) and the stature cue looks for the head ~0.4 m lower. Unknown until the agent has walked."""
+    from hub.identity_cues import AgentCues
+
+    rng = np.random.default_rng(3)
+    cues = AgentCues("a", "a-waist", 100.0)
+    belt = np.radians(6.0)  # the sensor sits pitched on the lumbar curve: upright is not its z axis
+    up = np.array([np.sin(belt), 0.0, np.cos(belt)])
+
+    def push(start_s: float, seconds: float, gravity: np.ndarray, bounce_g: float) -> None:
+        t = start_s + np.arange(int(seconds * 100)) / 100
+        accel = gravity[None] * (1.0 + bounce_g * np.sin(2 * np.pi * 1.9 * t))[:, None] + rng.normal(0, 0.005, (len(t), 3))
+        cues.push_imu((t * S).astype(np.int64), accel, rng.normal(0, 0.5, (len(t), 3)))
+
+    push(0.0, 3.0, up, 0.0)  # standing still first: nothing known yet
+    assert np.isnan(cues.ring.window("tilt", 10, 10)).all()
+    push(3.0, 10.0, up, 0.25)  # walking
+    back = np.radians(6.0 - 12.0)  # then seated: the pelvis 12 deg back
+    push(13.0, 10.0, np.array([np.sin(back), 0.0, np.cos(back)]), 0.0)
+    walking, seated = cues.ring.window("tilt", 100, 20), cues.ring.window("tilt", 210, 20)
+    assert np.nanmax(walking) < 2.0 and np.nanmin(seated) > 10.0
