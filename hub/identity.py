@@ -340,16 +340,22 @@ class IdentityEngine(TrackRules):
         excess = np.where(present, stack - 1.0, 0.0).sum(axis=0)
         if s.stature_weight > 0 and np.isfinite(cues["height"]).any():
             motion = np.where(present[0], np.where(present[:3], stack[:3] - 1.0, 0.0).sum(axis=0), np.nan)
-            stature = self.statures.cost(cues["height"])  # from the bins before these: a bin never judges itself
-            with np.errstate(invalid="ignore"):
-                seated = agent["tilt"] > s.seated_tilt_deg  # its head is ~0.35-0.4 m below its stature
-            if seated.any():
-                risen = np.fmin.reduce([self.statures.cost(cues["height"] + drop) for drop in SEATED_DROP_M])
-                stature = np.where(seated[None], risen, stature)
+            stature = self._stature_cost(cues["height"], agent["tilt"])  # from the bins before these
             with np.errstate(invalid="ignore"):
                 self.statures.learn(cues["height"], motion, t_speed > MOVING_MPS)
             excess = excess + np.where(np.isfinite(stature), s.stature_weight * stature, 0.0)
         return np.where(present[0], excess, np.nan)
+
+    def _stature_cost(self, height_m: np.ndarray, tilt_deg: np.ndarray) -> np.ndarray:
+        """(tracks, agents, bins) from the stature profile; for an agent whose waist says it sits (tilted
+        seated_tilt_deg from walking upright), the profile is read SEATED_DROP_M above the track's head."""
+        stature = self.statures.cost(height_m)
+        with np.errstate(invalid="ignore"):
+            seated = tilt_deg > self.settings.seated_tilt_deg
+        if seated.any():
+            risen = np.fmin.reduce([self.statures.cost(height_m + drop) for drop in SEATED_DROP_M])
+            stature = np.where(seated[None], risen, stature)
+        return stature
 
     def _course_cost(self, tracks: list[_Track], t_vx: np.ndarray, t_vy: np.ndarray, a_vx: np.ndarray,
                      a_vy: np.ndarray, count: int) -> np.ndarray:

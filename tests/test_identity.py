@@ -460,3 +460,22 @@ def test_the_waist_tells_seated_from_upright_by_its_tilt_from_how_it_walks():
     push(13.0, 10.0, np.array([np.sin(back), 0.0, np.cos(back)]), 0.0)
     walking, seated = cues.ring.window("tilt", 100, 20), cues.ring.window("tilt", 210, 20)
     assert np.nanmax(walking) < 2.0 and np.nanmin(seated) > 10.0
+
+
+def test_a_seated_wearers_stature_is_looked_for_lower_than_a_standing_ones():
+    """Agent a (1.70 m) sits: its head is at ~1.32 m. Read at the track's height, a's stature cue would call
+    its own track someone else's; read 0.33-0.43 m higher (a's waist is tilted), it fits. b (1.55 m),
+    standing, is not a 1.32 m head either way."""
+    rng = np.random.default_rng(4)
+    engine = IdentityEngine(session(["a", "b"]))
+    for _ in range(300):
+        heights = np.vstack([1.70 + rng.normal(0, 0.02, 10), 1.55 + rng.normal(0, 0.02, 10)])
+        motion = np.empty((2, 2, 10))
+        motion[0, 0], motion[1, 1] = rng.normal(-0.7, 0.5, (2, 10))
+        motion[0, 1], motion[1, 0] = rng.normal(0.5, 0.8, (2, 10))
+        engine.statures.learn(heights, motion, np.ones((2, 10), dtype=bool))
+    seated_head = np.array([[1.32]])
+    upright = engine._stature_cost(seated_head, np.array([[0.0], [0.0]]))
+    a_seated = engine._stature_cost(seated_head, np.array([[12.0], [0.0]]))
+    assert upright[0, 0, 0] > 0.3 and a_seated[0, 0, 0] < 0.1  # a: far from its stature, unless it sits
+    assert upright[0, 1, 0] == a_seated[0, 1, 0] > 0.3  # b standing: not b
