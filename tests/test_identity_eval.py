@@ -41,4 +41,10 @@ def test_identity_table_scores_both_methods_from_a_session_log(tmp_path: Path):
     assert 0.2 <= delay_s <= 1.0
     assert ceiling["time_correct_pct"] == pytest.approx(100.0 * (1 - 6 * delay_s / 89.5), abs=0.3)
     assert ceiling["lost_pct"]["no track: its track in its first 1.5 s"] == pytest.approx(100 - ceiling["time_correct_pct"])
+    # six runs of a person on a track (1 a, 2 b, 3 c, 4 b, 5 a, 7 a) for 3 agents over 30 s: 4 per agent-minute;
+    # the ceiling names each exactly its delay after it starts
+    assert ceiling["naming"]["runs_per_agent_minute"] == pytest.approx(4.0, rel=0.02)
+    assert ceiling["naming"]["first_frame_pct"] == 0 and ceiling["naming"]["p90_s"] == pytest.approx(delay_s, abs=0.06)
+    assert live["naming"]["runs_per_agent_minute"] == ceiling["naming"]["runs_per_agent_minute"]
+    assert 0 <= live["naming"]["p50_s"] <= live["naming"]["p90_s"] and "naming:" in to_table(report)
     assert "time correct" in to_table(report) and "lost: wrong track" in to_table(report)
