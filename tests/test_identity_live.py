@@ -40,9 +40,10 @@ def test_identified_tracks_reach_the_hub_and_become_video_corrections():
     assert ready.wait(WAIT_S)
     with open_session(zenoh_config(connect=[endpoint])) as bus, Publisher(bus) as publisher:
         wait_for_peers(bus, f"reckon/{venue}/alive/{Role.HUB.value}/*", 1, WAIT_S)
-        # paced at SPEED x the scene's time: the hub's subscriptions (one per stream kind) deliver on
-        # their own threads, and a burst would let camera frames overtake IMU batches by more than
-        # the engine's delay, which a live venue never does
+        # paced at SPEED x the scene's time, as a live venue delivers. Published in one burst instead,
+        # about half the runs (stop 15) name a wrongly for b's track 4 just after the crossing (6.4-7.6
+        # s of the scene), although the engine now scores a camera bin only once the agents' data is
+        # in; not understood yet (the hub's pose of a chair during a burst is one suspect)
         started = time.monotonic()
         for arrival_ns, key, message in events:
             ahead = (arrival_ns - events[0][0]) * 1e-9 / SPEED - (time.monotonic() - started)
