@@ -19,6 +19,8 @@ from hub.pedestrian_hub import PedestrianHub
 from protocol import keys, messages
 from protocol.session import Session
 
+STALE_MPS = 2.0  # a chair's typical speed (a 10-chair game: 150-200 m in 120 s): how a pose's doubt grows with its age
+
 
 class VenueHub:
     def __init__(self, session: Session, settings: HubSettings = HubSettings(),
@@ -64,9 +66,13 @@ class VenueHub:
         return self.chairs.key_for(message)
 
     def _pose_of(self, agent_id: str, time_ns: int) -> tuple[np.ndarray, float] | None:
+        """A chair's live position at `time_ns` and its sd: the edge's covariance, what it is missing
+        (hub/chair_hub.py), and how far the chair may have gone since that pose if its poses have not
+        reached `time_ns` yet (a device's link stalls, a burst)."""
         view = self.chairs.agents.get(agent_id)
         pose = view.pose_at(time_ns) if view is not None else None
         if pose is None:
             return None
-        honest = pose[1] + view.extra  # the edge's covariance and what it is missing (hub/chair_hub.py)
-        return pose[0], float(np.sqrt(max(np.linalg.eigvalsh(honest).max(), 0.0)))
+        honest = pose[1] + view.extra
+        stale_m = STALE_MPS * max(time_ns - view.latest_ns, 0) * 1e-9 if view.latest_ns is not None else 0.0
+        return pose[0], float(np.hypot(np.sqrt(max(np.linalg.eigvalsh(honest).max(), 0.0)), stale_m))

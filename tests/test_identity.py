@@ -479,3 +479,19 @@ def test_a_seated_wearers_stature_is_looked_for_lower_than_a_standing_ones():
     a_seated = engine._stature_cost(seated_head, np.array([[12.0], [0.0]]))
     assert upright[0, 0, 0] > 0.3 and a_seated[0, 0, 0] < 0.1  # a: far from its stature, unless it sits
     assert upright[0, 1, 0] == a_seated[0, 1, 0] > 0.3  # b standing: not b
+
+
+def test_the_hubs_pose_of_a_chair_grows_doubtful_while_its_poses_have_not_arrived():
+    """The identity engine asks the hub where a chair was at a camera time; if the chair's newest pose is
+    older (its link stalled, a burst), the chair may have moved since: the sd grows at STALE_MPS."""
+    from hub.venue_hub import STALE_MPS, VenueHub
+    from identity_scenes import edge_poses
+
+    hub = VenueHub(session(["a"], chairs=True))
+    times = np.arange(0, 2.0, 0.01)
+    for arrival, pose in edge_poses("a", times, np.column_stack([1.0 + times, np.full_like(times, 1.0)]), (0.0, 0.0)):
+        hub.on_message(pose, arrival)
+    fresh = hub._pose_of("a", int(1.96 * S))
+    stale = hub._pose_of("a", int(3.96 * S))  # 2 s after its newest pose
+    assert fresh[1] < 1.0 and np.allclose(stale[0], [1.0 + 1.96, 1.0], atol=0.05)
+    assert stale[1] == pytest.approx(np.hypot(fresh[1], 2.0 * STALE_MPS), rel=0.05)
