@@ -59,6 +59,8 @@ CORRECTIONS = ("beacon", "collision", "fix", "camera")  # fix: an operator's; ca
 FIX_GATE_CHI2 = 13.8  # 99.9 %, 2 dof
 ACROSS_VARIANCE_M2 = 1e4  # a contact says nothing about the direction across the line between chairs
 HISTORY = 1024  # poses kept per agent for looking back to a measured time (20 s at 50 Hz)
+GAP_S = 0.2  # poses further apart than this are a gap (the edge publishes at 50 Hz)
+STALE_MPS = 2.0  # a chair's typical speed (a 10-chair game: 150-200 m in 120 s): how a pose's doubt grows with its age
 
 
 @dataclass(frozen=True)
@@ -131,6 +133,22 @@ class AgentView:
                 chosen = entry
                 break
         return chosen[1], chosen[2]
+
+    def pose_bridged(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """As pose_at, but inside a gap of more than GAP_S between two poses (the link stalled) the position
+        is interpolated between them and its covariance grows with the gap (the chair may have turned):
+        a fix that falls in the gap is not compared with where the chair was before it."""
+        if not self.history:
+            return None
+        after = next((k for k in range(len(self.history) - 1, -1, -1) if self.history[k][0] <= time_ns), None)
+        if after is None or after + 1 >= len(self.history):
+            return self.pose_at(time_ns)
+        (t0, xy0, cov0), (t1, xy1, cov1) = self.history[after], self.history[after + 1]
+        if (t1 - t0) * 1e-9 <= GAP_S:
+            return xy0, cov0
+        w = (time_ns - t0) / (t1 - t0)
+        spread = STALE_MPS * min(time_ns - t0, t1 - time_ns) * 1e-9
+        return (1 - w) * xy0 + w * xy1, np.maximum(cov0, cov1) + spread**2 * np.eye(2)
 
 
 @dataclass
@@ -314,7 +332,7 @@ class ChairHub:
 
     def _absolute(self, view: AgentView, time_ns: int, xy: np.ndarray, covariance: np.ndarray, kind: Kind,
                   source: str) -> list[Any]:
-        then = view.pose_at(time_ns)
+        then = view.pose_bridged(time_ns)
         if then is None:
             return []
         shift = xy - then[0]

@@ -13,13 +13,11 @@ from typing import Any
 
 import numpy as np
 
-from hub.chair_hub import ChairHub, HubSettings
+from hub.chair_hub import STALE_MPS, ChairHub, HubSettings
 from hub.identity import IdentityEngine, IdentitySettings
 from hub.pedestrian_hub import PedestrianHub
 from protocol import keys, messages
 from protocol.session import Session
-
-STALE_MPS = 2.0  # a chair's typical speed (a 10-chair game: 150-200 m in 120 s): how a pose's doubt grows with its age
 
 
 class VenueHub:

@@ -210,3 +210,21 @@ def test_fixes_from_different_tracks_or_with_scattered_offsets_do_not_relock():
             if k % 50 == 10:
                 send(hub, video_fix("c0", t, 10.0 + offsets[k // 50], 5.0, source=sources[k // 50]))
         assert hub.counters.relocks == 0 and hub.counters.gated_out == 4
+
+
+def test_a_fix_inside_a_gap_in_the_poses_is_compared_with_where_the_chair_was_then():
+    """The edge's poses stop for 2 s (its link stalled) while the chair rolls on at 1 m/s; a camera fix from
+    inside the gap must be compared with the poses around it, interpolated, not with the last pose before
+    it (1 m behind, with a 5 cm sd: that fix was refused as an outlier)."""
+    settings = HubSettings(corrections=frozenset({"camera"}), extra_m2_per_m=0.0, extra_m2_per_s=0.0, relock_after=0)
+    hub = ChairHub(venue(1), settings)
+    out = []
+    for k in range(301):  # 0-6 s along x at 1 m/s, no poses from 2 to 4 s
+        t_s = k * 0.02
+        if not 2.0 < t_s < 4.0:
+            out += send(hub, pose("c0", int(t_s * S), t_s, 5.0, sd=0.05))
+        if k == 100:
+            out += send(hub, video_fix("c0", int(3.0 * S), 3.02, 5.0))  # where the chair was at 3 s
+    taken = corrections(out)
+    assert hub.counters.gated_out == 0 and len(taken) == 1
+    assert taken[0].dx_m == pytest.approx(0.02, abs=0.02) and taken[0].dy_m == pytest.approx(0.0, abs=0.02)
