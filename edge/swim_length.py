@@ -23,7 +23,7 @@ from scipy.signal import butter, find_peaks, sosfiltfilt
 
 from edge.swim_bins import DV_X, DV_Y, GYRO_X, GYRO_Z, HEAD_X, HEAD_Y, RATE, SURGE, T, UP_X, UP_Z
 from edge.swim_paper import LengthEstimate, lateral_profile
-from protocol.session import Mount, Route, route_end_heading_rad
+from protocol.session import Route, route_end_heading_rad
 
 HEADING_CUTOFF_HZ = 0.2  # below breathing (every 2-3 strokes: 0.4-0.8 Hz) and strokes; the diagonal's
 # turn (1.5-3 m, about 2 s) and snaking (periods over 10 s) pass
@@ -124,15 +124,6 @@ class YawDrift:
                 gain = variance / spread
                 rate, variance = rate + gain * (value - rate), (1.0 - gain) * variance
         return YawDrift(rate, variance, lane)
-
-
-def drift_learner(mount: Mount) -> YawDrift:
-    """A new YawDrift, for every mounting. A kickboard's heading is the board's, turned by hand at
-    the wall, and learning it once made its diagonals worse (-9.2 / 26.1 % against -8.3 / 27.5 without,
-    simulated sets, seeds 1-6) while the velocity's zero was the next push-off; with the zero at the
-    touch it helps (the same sets: diagonal -2.00 / 8.96 % RMS 4.09 -> -1.72 / 5.24 RMS 3.04, straight
-    +0.17 / 0.56 -> +0.02 / 0.16): the gate refuses the hand turns' readings."""
-    return YawDrift()
 
 
 @dataclass

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from edge.swim_bins import COLUMNS, GYRO_X, GYRO_Y, GYRO_Z, RATE, T, BinSettings, BodyBinner
-from edge.swim_length import LaneReading, RestGyro, YawDrift, drift_learner, lane_reading, reckon_length
+from edge.swim_length import LaneReading, RestGyro, YawDrift, lane_reading, reckon_length
 from protocol.session import Mount, Route
 from sim_devices.swim.simulate import simulate_set
 
@@ -45,12 +45,6 @@ def test_first_length_uses_its_own_turn_and_wild_readings_are_refused() -> None:
     # Not a reversal onto the same lane (the swimmer crossed lanes): no pair reading.
     sideways = LaneReading(settled.last.heading_rad + math.pi / 2, settled.last.time_ns + 25 * 10**9, math.nan)
     assert settled.learn(sideways).rate_dps == settled.rate_dps
-
-
-def test_every_mounting_learns_its_drift() -> None:
-    # The kickboard too, since the velocity's zero is the touch (edge/swim_length.drift_learner).
-    mounts = (Mount.WAIST, Mount.BACK, Mount.HEAD, Mount.KICKBOARD)
-    assert all(isinstance(drift_learner(mount), YawDrift) for mount in mounts)
 
 
 def test_drift_learnt_on_a_simulated_diagonal_set_corrects_its_lengths() -> None:

@@ -25,10 +25,10 @@ import numpy as np
 from edge.mounting import seat_to_chair
 from edge.swim_bins import BinSettings, BodyBinner, T
 from edge.swim_edge import SwimTracker, pick_zero_end
-from edge.swim_length import RestGyro, drift_learner, lane_reading, reckon_length
+from edge.swim_length import RestGyro, YawDrift, lane_reading, reckon_length
 from edge.swim_paper import paper_length
 from protocol.errors import InputError
-from protocol.session import AgentKind, Mount, Route, route_end_heading_rad
+from protocol.session import AgentKind, Route, route_end_heading_rad
 from protocol.session_log import SessionData
 
 MATCH_S = 1.0
@@ -149,7 +149,7 @@ def evaluate_swim(data: SessionData, path: Path, progress: Callable[[str], None]
 def _true_walls(report: SwimReport, rows: np.ndarray, truth: list[Any], pool: float, route: Route,
                 common: dict[str, Any]) -> None:
     times = rows[:, T]
-    drift = drift_learner(Mount(common["mounting"]))
+    drift = YawDrift()  # every mounting learns its drift, as the live edge (edge/swim_edge.py)
     rest = RestGyro()  # as the live tracker: the rest before the set read for its first length's drift
     for k, length in enumerate(truth, start=1):
         push, touch = (int(i) for i in np.searchsorted(times, [length.start_ns, length.timestamp_ns]))
