@@ -123,24 +123,22 @@ class AgentView:
     refused_source: str = ""  # the video source whose fixes were refused in a row, most recent last
     refused: list = field(default_factory=list)  # ... as [(time, offset)]
 
+    def _last_at(self, time_ns: int) -> int | None:
+        """Index in `history` of the last pose not after `time_ns` (None: all are after it)."""
+        return next((k for k in range(len(self.history) - 1, -1, -1) if self.history[k][0] <= time_ns), None)
+
     def pose_at(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """Live position and its covariance at `time_ns` (the last pose not after it)."""
+        """Live position and its covariance at `time_ns` (the last pose not after it; the first if none)."""
         if not self.history:
             return None
-        chosen = self.history[0]
-        for entry in reversed(self.history):
-            if entry[0] <= time_ns:
-                chosen = entry
-                break
-        return chosen[1], chosen[2]
+        _, xy, cov = self.history[self._last_at(time_ns) or 0]
+        return xy, cov
 
     def pose_bridged(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """As pose_at, but inside a gap of more than GAP_S between two poses (the link stalled) the position
         is interpolated between them and its covariance grows with the gap (the chair may have turned):
         a fix that falls in the gap is not compared with where the chair was before it."""
-        if not self.history:
-            return None
-        after = next((k for k in range(len(self.history) - 1, -1, -1) if self.history[k][0] <= time_ns), None)
+        after = self._last_at(time_ns)
         if after is None or after + 1 >= len(self.history):
             return self.pose_at(time_ns)
         (t0, xy0, cov0), (t1, xy1, cov1) = self.history[after], self.history[after + 1]

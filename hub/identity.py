@@ -49,7 +49,8 @@ from protocol.messages import CorrectionKind
 from protocol.session import AgentKind, Mount, Session
 
 METHOD = "reckon"
-SEATED_DROP_M = (0.33, 0.38, 0.43)  # a seated head below the stature: seat + sitting height ~0.52 x stature (docs/simulator-room.md)
+# how far a seated head is below the stature: seat + sitting height ~0.52 x stature (docs/simulator-room.md)
+SEATED_DROP_M = (0.33, 0.38, 0.43)
 
 
 @dataclass(frozen=True)
@@ -104,7 +105,8 @@ class IdentitySettings:
     position_clip: float = 4.0  # ... nor the hub's pose's (chairs): it can be wrong by metres, the motion cues not
 
     def __post_init__(self) -> None:
-        checks = {"hop_s": (0.1, 10.0), "delay_s": (0.0, 10.0), "max_delay_s": (0.0, 10.0), "forget_per_s": (0.01, 1.0), "fast_forget_per_s": (0.0, 1.0), "fast_margin": (0.0, 100.0),
+        checks = {"hop_s": (0.1, 10.0), "delay_s": (0.0, 10.0), "max_delay_s": (0.0, 10.0), "forget_per_s": (0.01, 1.0),
+                  "fast_forget_per_s": (0.0, 1.0), "fast_margin": (0.0, 100.0),
                   "pedestrian_forget_per_s": (0.01, 1.0), "prior_bins": (0.0, 1e3),
                   "nobody_cost": (0.0, 100.0), "claim_margin": (0.0, 100.0), "switch_margin": (0.0, 100.0),
                   "fix_every_s": (0.0, 3600.0), "track_timeout_s": (0.0, 60.0), "max_lag_s": (0.0, 5.0),
@@ -114,8 +116,8 @@ class IdentitySettings:
                   "encounter_keep": (0.0, 1.0), "share_m": (0.0, 100.0),
                   "speed_sd_mps": (1e-3, 10.0), "yaw_sd_dps": (1e-3, 1e3), "moving_sd": (1e-3, 10.0),
                   "position_sd_m": (1e-3, 100.0), "lag_prior_s": (-5.0, 5.0), "continue_height_m": (0.0, 10.0),
-                  "stature_weight": (0.0, 100.0), "seated_tilt_deg": (0.0, 90.0), "course_sd_deg": (0.0, 180.0), "course_min_mps": (0.0, 10.0),
-                  "course_prior_bins": (0.0, 1e4), "course_forget_per_s": (0.01, 1.0)}
+                  "stature_weight": (0.0, 100.0), "seated_tilt_deg": (0.0, 90.0), "course_sd_deg": (0.0, 180.0),
+                  "course_min_mps": (0.0, 10.0), "course_prior_bins": (0.0, 1e4), "course_forget_per_s": (0.01, 1.0)}
         for name, (low, high) in checks.items():
             value = getattr(self, name)
             if not low <= value <= high:
@@ -310,9 +312,8 @@ class IdentityEngine(TrackRules):
         yaw = np.where(chair[:, None], b["yaw_dr"], b["yaw"])
         with np.errstate(invalid="ignore"):
             moving = np.where(np.isfinite(speed), speed > MOVING_MPS, np.nan)
-        nan = np.full_like(speed, np.nan)
-        return {"speed": speed, "yaw": yaw, "moving": moving, "tilt": b["tilt"], "vx": np.where(chair[:, None], b["vx_dr"], nan),
-                "vy": np.where(chair[:, None], b["vy_dr"], nan)}
+        return {"speed": speed, "yaw": yaw, "moving": moving, "tilt": b["tilt"],
+                "vx": np.where(chair[:, None], b["vx_dr"], np.nan), "vy": np.where(chair[:, None], b["vy_dr"], np.nan)}
 
     def _bin_costs(self, tracks: list[_Track], agent: dict[str, np.ndarray], first: int, count: int,
                    camera_sd_m: float) -> np.ndarray:

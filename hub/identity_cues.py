@@ -36,7 +36,7 @@ TRACK_DELAY_BINS = 2  # ... so it describes the motion about a quarter second ag
 TURN_BINS = 5  # turn rates over half a second: the pelvis' rotation at the step frequency averages out
 NO_BIN = -(2**62)
 WALKING_G = 0.08  # the waist's vertical activity (RMS) above this is walking: upright
-UPRIGHT_S = 2.0  # walking needed before the upright direction is known
+UPRIGHT_S = 1.0  # walking needed before the upright direction is known
 UPRIGHT_FORGET = 0.9999  # per sample: the upright direction is remembered for a few minutes
 
 
@@ -230,7 +230,7 @@ class AgentCues:
         keep = UPRIGHT_FORGET ** len(unit)
         self.upright = self.upright * keep + unit[walking].sum(axis=0)
         norm = float(np.linalg.norm(self.upright))
-        if norm < UPRIGHT_S / self.dt_s * 0.5:
+        if norm < UPRIGHT_S / self.dt_s:  # the sum of unit vectors: about the walking samples seen
             return np.full(len(unit), np.nan)
         return np.degrees(np.arccos(np.clip(unit @ (self.upright / norm), -1.0, 1.0)))
 

@@ -140,6 +140,13 @@ def _back_filled(held: dict[str, np.ndarray], tracks: CameraTracks) -> dict[str,
     return out
 
 
+def _rows_by_frame(tracks: CameraTracks) -> tuple[np.ndarray, np.ndarray]:
+    """(starts, ends): frame f's rows are starts[f]:ends[f] (rows are in frame order)."""
+    frame_of_row = np.searchsorted(tracks.frame_ns, tracks.time_ns)
+    frames = np.arange(len(tracks.frame_ns))
+    return np.searchsorted(frame_of_row, frames), np.searchsorted(frame_of_row, frames, side="right")
+
+
 def _held_at(changes: list[tuple[int, str, int]], camera: str, frame_ns: np.ndarray) -> np.ndarray:
     """The track id the agent held at each frame time (0: none)."""
     mine = [(t, track) for t, cam, track in changes if cam == camera]
@@ -199,9 +206,7 @@ def _ceiling(data: SessionData, agents: list[str], latency_s: float) -> Identity
             continue
         held = {a: np.zeros(len(tracks.frame_ns), dtype=np.int64) for a in agents}
         since: dict[tuple[int, str], int] = {}  # (track, person) -> first frame of its current run
-        frame_of_row = np.searchsorted(tracks.frame_ns, tracks.time_ns)
-        starts = np.searchsorted(frame_of_row, np.arange(len(tracks.frame_ns)))
-        ends = np.searchsorted(frame_of_row, np.arange(len(tracks.frame_ns)), side="right")
+        starts, ends = _rows_by_frame(tracks)
         for f, frame_ns in enumerate(tracks.frame_ns):
             shown = {(int(tracks.track_id[r]), a) for r in range(starts[f], ends[f])
                      for a in str(tracks.person_id[r]).split("+") if a}
@@ -314,9 +319,7 @@ def _score(method: str, data: SessionData, agents: list[str], assignment: dict[s
         if tracks.person_id is None or camera not in assignment:
             continue
         held = assignment[camera]
-        frame_of_row = np.searchsorted(tracks.frame_ns, tracks.time_ns)
-        starts = np.searchsorted(frame_of_row, np.arange(len(tracks.frame_ns)))
-        ends = np.searchsorted(frame_of_row, np.arange(len(tracks.frame_ns)), side="right")
+        starts, ends = _rows_by_frame(tracks)
         truth_xy = {a: _truth_at(data, a, tracks.frame_ns) for a in agents}
         ids, first_row = np.unique(tracks.track_id, return_index=True)
         born_ns = dict(zip(ids.tolist(), tracks.time_ns[first_row].tolist()))
