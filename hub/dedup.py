@@ -1,7 +1,7 @@
 """Which hub inputs are repeats: fixed memory per stream, no I/O.
 
 An edge's spool replays, after a hub loss, a window of messages the hub may already have had
-(reckon/spool.py), and a restarted hub may see again what its recording already held. Each
+(reckon/transport/spool.py), and a restarted hub may see again what its recording already held. Each
 input belongs to one stream, and within a stream it has a position that only moves forward:
 
 - counted streams: ImuBatch by (agent, sensor) and its `sequence`; CameraFrame by camera and its

@@ -125,7 +125,7 @@ class Venue:
     # a session log so the log stands alone. Each polygon is [outer ring, hole, hole, ...], a ring
     # a list of [x, y].
     floor_plan: tuple[Any, ...] = ()
-    # The Earth's field at the venue, for phones' magnetometers (edge/pdr_magnetic.py): the direction
+    # The Earth's field at the venue, for phones' magnetometers (edge/pedestrian/magnetic.py): the direction
     # of magnetic north in the venue frame (deg, counter-clockwise from +x: true north's direction
     # minus the declination), and the undisturbed field's strength and dip, which tell a clean reading
     # from one bent by the building's steel. None: unknown, the magnetometer is not used.

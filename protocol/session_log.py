@@ -44,7 +44,7 @@ class SessionWriter:
 
     def flush(self) -> None:
         """End the chunk in progress and hand every message so far to the OS, so a reader sees them
-        even if this process is killed before `close` (the hub's checkpoints, hub/hub_state.py)."""
+        even if this process is killed before `close` (the hub's checkpoints, reckon/processes/checkpoint.py)."""
         self._writer._writer.flush()  # mcap_protobuf's Writer keeps the mcap Writer, whose flush() this is
 
     def close(self) -> None:

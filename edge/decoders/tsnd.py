@@ -148,7 +148,7 @@ class TickClock:
     WRAP_WINDOW_MS after it. Fuzzing found why the window is needed: a damaged frame that passes
     the 8-bit BCC carries a random tick, and "any tick half a day below the last" then added a day
     to every later timestamp. A device silent across midnight for longer than the window comes
-    back a day early: a clock jump, which edge/device_health.py re-anchors."""
+    back a day early: a clock jump, which edge/health.py re-anchors."""
 
     def __init__(self) -> None:
         self.days = 0

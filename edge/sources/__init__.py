@@ -4,7 +4,7 @@ Sources are context managers opened from URLs (`serial:///dev/ttyUSB0?baud=11520
 read goes to an optional `record_raw` callback before it is decoded.
 """
 
-from edge.sources.serial_source import (
+from edge.sources.serial import (
     DeviceDisconnected,
     DeviceError,
     DeviceUnavailable,

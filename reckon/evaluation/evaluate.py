@@ -9,8 +9,8 @@ from typing import Callable
 
 import numpy as np
 
-from edge.impacts import PAPER_THRESHOLD_G
-from hub.paper_rules import Collision, pair_impacts
+from edge.chair.paper.impacts import PAPER_THRESHOLD_G
+from hub.chair.paper import Collision, pair_impacts
 from protocol.errors import InputError
 from protocol.session_log import SessionData, read_session
 from reckon.evaluation.headings import HeadingSource, headings

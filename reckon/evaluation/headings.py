@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from edge.mag_heading import magnetometer_heading
+from edge.chair.paper.mag_heading import magnetometer_heading
 from reckon.evaluation.inputs import FRAME_HZ, GRID_HZ, AgentInputs, EvalInputs
 
 

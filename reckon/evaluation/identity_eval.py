@@ -25,12 +25,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hub.chair_hub import HubSettings
+from hub.chair.hub import HubSettings
 from hub.clocks import ClockOffsets
-from hub.identity import IdentitySettings
-from hub.track_paper import identify
-from hub.track_paper_fragments import training_pairs
-from hub.track_paper_features import PaperModel, fit_model, vertical_acceleration
+from hub.identity.engine import IdentitySettings
+from hub.identity.paper.search import identify
+from hub.identity.paper.fragments import training_pairs
+from hub.identity.paper.features import PaperModel, fit_model, vertical_acceleration
 from protocol.session import Mount
 from protocol.session_log import CameraTracks, SessionData
 from reckon.evaluation.reckon_run import log_inputs, run_lockstep

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from edge.impacts import detect_impacts
+from edge.chair.paper.impacts import detect_impacts
 from edge.mounting import seat_to_chair, signed_axis
-from edge.wheel import chair_travel_m, travel_from_rotation_m, wheel_rotation_deg
+from edge.chair.paper.wheel import chair_travel_m, travel_from_rotation_m, wheel_rotation_deg
 from protocol.errors import InputError
 from protocol.session import Agent, Mount
 from protocol.session_log import ImuSeries, SessionData

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hub.paper_rules import PAIRING_WINDOW_S, Collision
+from hub.chair.paper import PAIRING_WINDOW_S, Collision
 from protocol.session_log import Contact
 
 

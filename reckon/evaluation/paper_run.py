@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from edge.paper_dr import PaperDrState, dead_reckon
-from hub.paper_rules import (Collision, centroid_shift, decay_reliability, midpoint_collision,
+from edge.chair.paper.dr import PaperDrState, dead_reckon
+from hub.chair.paper import (Collision, centroid_shift, decay_reliability, midpoint_collision,
                              weighted_collision)
 from protocol.session import Beacon, Venue
 from protocol.session_log import Sightings

@@ -1,13 +1,13 @@
 """`reckon eval` on pedestrian sessions (phones): the paper's method and ours, with and without
 map matching, scored at the truth waypoints.
 
-Each session is pushed in log order through the live code: the edge (edge/pdr_edge.py, with our
-dead reckoning or the paper's) and the hub's map matcher (hub/pedestrian_hub.py). One pass gives
+Each session is pushed in log order through the live code: the edge (edge/pedestrian/edge.py, with our
+dead reckoning or the paper's) and the hub's map matcher (hub/pedestrian/hub.py). One pass gives
 both rows of a method: the edge's poses (no map matching) and the hub's (map matching).
-- paper: edge/pdr_paper.py (5 s FFT cadence, height model, Euler attitude) and the paper's turn
-  snap to corridor points (hub/map_snap_paper.py), which needs the venue's `map_points`; on a
+- paper: edge/pedestrian/paper.py (5 s FFT cadence, height model, Euler attitude) and the paper's turn
+  snap to corridor points (hub/pedestrian/paper.py), which needs the venue's `map_points`; on a
   floor plan alone it has nothing to snap to and its map-matched row is left out (noted);
-- reckon: edge/pdr.py and the particle filter over the walkable area (hub/map_particles.py).
+- reckon: edge/pedestrian/estimator.py and the particle filter over the walkable area (hub/pedestrian/particles.py).
 
 Scoring: every truth pose after the agent's first accepted stand scan is a waypoint; the estimate
 there is interpolated between the track's poses (the stand pose starts each track). Over the
@@ -25,10 +25,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from edge.pdr_edge import PedestrianEdge
-from hub.map_matching import SnapStage
-from hub.map_snap_paper import PaperSnapMatcher
-from hub.pedestrian_hub import PedestrianHub, particle_matcher_factory
+from edge.pedestrian.edge import PedestrianEdge
+from hub.pedestrian.matching import SnapStage
+from hub.pedestrian.paper import PaperSnapMatcher
+from hub.pedestrian.hub import PedestrianHub, particle_matcher_factory
 from protocol import messages
 from protocol.errors import InputError
 from protocol.session import AgentKind, Mount, Session
@@ -115,7 +115,7 @@ def run_method(session: Session, inputs: list[Any], method: str) -> list[PhoneRu
     """Push the session's phone batches and stand scans through one edge per phone and its hub
     (a hub per phone: the hub keys its matchers by agent, and one agent may carry two phones)."""
     if method == "paper":
-        from edge.pdr_paper import PaperPdr
+        from edge.pedestrian.paper import PaperPdr
 
         points = session.venue.map_points
         factory = (lambda agent_id: PaperSnapMatcher(points)) if points else None  # noqa: E731

@@ -1,7 +1,7 @@
 """Our method offline: the live edge and hub code, driven in lockstep from a session log.
 
 Every message of the log goes, in arrival (log time) order, where it would go live: an ImuBatch
-to its chair's edge (edge/chair_edge.py) and to the hub (hub/chair_hub.py, for clock offsets),
+to its chair's edge (edge/chair/edge.py) and to the hub (hub/chair/hub.py, for clock offsets),
 the edge's poses and impacts to the hub, a beacon sighting to the hub, and the hub's
 corrections back to the edge at once. So `reckon eval` scores exactly what `reckon edge` +
 `reckon hub` compute, minus the bus's delay and reordering.
@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from edge.chair_edge import ChairEdge
-from edge.chair_merger import ChairMerger
-from edge.chair_estimator import ChairSample
-from hub.chair_hub import HubSettings
-from hub.venue_hub import VenueHub
+from edge.chair.edge import ChairEdge
+from edge.chair.merger import ChairMerger
+from edge.chair.estimator import ChairSample
+from hub.chair.hub import HubSettings
+from hub.venue import VenueHub
 from protocol import messages
 from protocol.session import AgentKind, Session
 from protocol.session_log import LogMessages

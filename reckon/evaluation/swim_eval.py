@@ -1,7 +1,7 @@
 """`reckon eval` on a swimming session: the paper's method and ours, per mounting and route.
 
-- paper: edge/swim_paper.py with the TRUE wall times (the paper cut its lengths by hand);
-- reckon: the live edge's own output (edge/swim_edge.py: walls detected from the sensor, no truth);
+- paper: edge/swim/paper.py with the TRUE wall times (the paper cut its lengths by hand);
+- reckon: the live edge's own output (edge/swim/edge.py: walls detected from the sensor, no truth);
 - reckon, true walls: our length estimate given the true wall times, to tell the estimator's error
   from the wall detector's.
 Distances are scored per length against the simulator's truth (TruthLength: the body centre's
@@ -23,10 +23,10 @@ from typing import Any, Callable
 import numpy as np
 
 from edge.mounting import seat_to_chair
-from edge.swim_bins import BinSettings, BodyBinner, T
-from edge.swim_edge import SwimTracker, pick_zero_end
-from edge.swim_length import RestGyro, YawDrift, lane_reading, reckon_length
-from edge.swim_paper import paper_length
+from edge.swim.bins import BinSettings, BodyBinner, T
+from edge.swim.edge import SwimTracker, pick_zero_end
+from edge.swim.length import RestGyro, YawDrift, lane_reading, reckon_length
+from edge.swim.paper import paper_length
 from protocol.errors import InputError
 from protocol.session import AgentKind, Route, route_end_heading_rad
 from protocol.session_log import SessionData
@@ -149,7 +149,7 @@ def evaluate_swim(data: SessionData, path: Path, progress: Callable[[str], None]
 def _true_walls(report: SwimReport, rows: np.ndarray, truth: list[Any], pool: float, route: Route,
                 common: dict[str, Any]) -> None:
     times = rows[:, T]
-    drift = YawDrift()  # every mounting learns its drift, as the live edge (edge/swim_edge.py)
+    drift = YawDrift()  # every mounting learns its drift, as the live edge (edge/swim/edge.py)
     rest = RestGyro()  # as the live tracker: the rest before the set read for its first length's drift
     for k, length in enumerate(truth, start=1):
         push, touch = (int(i) for i in np.searchsorted(times, [length.start_ns, length.timestamp_ns]))

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from edge.mounting import signed_axis
-from edge.wheel import wheel_rotation_deg
+from edge.chair.paper.wheel import wheel_rotation_deg
 from protocol.errors import ConfigError, InputError
 from protocol.session import AXES, Mount, Session, session_from_dict
 from reckon.importers.report import ImportReport

@@ -8,7 +8,7 @@ checked against the walkable area with shapely (a body-wide strip along it must 
 - `paper`: the map of the paper's table 5 (building 2, floor 1 of Chiba Institute of Technology;
   coordinates in cm, here in m) and its route I-J-G-H-L-K-E-F-B-C-G-H-D-A-E-F-I (sec. 4.2; 280 m,
   15 corners of 90 deg; the paper counts 7 left and 7 right, the table's geometry gives 8 left and
-  7 right). Corridors 2 m wide (hub.walkable's default for a map without a plan).
+  7 right). Corridors 2 m wide (hub.pedestrian.walkable's default for a map without a plan).
 - `floorplan`: a 46 m x 24 m floor drawn here (no file is read): a loop corridor 2.4 m wide around
   a block of six rooms with 1 m doors (and a walled-off store room), and a 10 m x 20 m hall with
   two pillars at its east end. The walkable area is one polygon with holes (the block's walls, the
@@ -29,7 +29,7 @@ from protocol.session import MapPoint, Stand
 
 PRESETS = ("paper", "floorplan")
 BODY_HALF_WIDTH_M = 0.25  # half a shoulder width: the strip along a route that must be walkable
-PAPER_CORRIDOR_HALF_WIDTH_M = 1.0  # hub.walkable's corridor for a map without a floor plan
+PAPER_CORRIDOR_HALF_WIDTH_M = 1.0  # hub.pedestrian.walkable's corridor for a map without a floor plan
 
 # The paper's table 5: point, x cm, y cm, unit vectors of the corridors leaving it.
 PAPER_TABLE_5 = (

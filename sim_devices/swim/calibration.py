@@ -1,7 +1,7 @@
 """The swimming paper's method on simulated sets, against the paper's own results (its Tables 1-4).
 
 For every crawl swimmer (waist, back, head sensors) and kickboard of the default session plan,
-per seed, run `edge.swim_paper.paper_length` on each length from the true push-off start to the
+per seed, run `edge.swim.paper.paper_length` on each length from the true push-off start to the
 true wall touch (the paper cut its lengths by hand), with the raw sensor-x acceleration and the raw
 sensor-z gyro, and tabulate per mounting and route the estimates' min / median / max beside the
 paper's, plus the uncorrected double integral of the x acceleration (the paper's "without
@@ -23,7 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
-from edge.swim_paper import G, paper_length
+from edge.swim.paper import G, paper_length
 from protocol.session import Route, route_end_heading_rad
 from sim_devices.swim.params import SwimParams, params_with_overrides
 from sim_devices.swim.session import plan_agents

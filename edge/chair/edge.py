@@ -1,0 +1,122 @@
+"""One chair's edge computation, without I/O: sensor messages in, pose and impact messages out.
+
+ImuBatch messages of the chair's three sensors -> ChairMerger -> the chair filter
+(edge/chair/estimator.py, run by its compiled batch form edge/chair/kernel.py). A pose leaves on a fixed schedule of the seat clock (`pose_rate_hz`),
+an ImpactEvent at once. Corrections from the hub (`correct`) are applied before the next sample,
+to the state as it is then: a Correction measures where the chair was at its time, as an offset
+from the pose the hub had for that time, and the few samples since then moved the chair the same
+whatever its error. `reckon edge` wraps this in Zenoh; `reckon eval` drives it in lockstep with
+the hub.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from edge.chair import kernel
+from edge.chair.estimator import N, ChairSettings, ChairState, Flag, position_update, start
+from edge.chair.merger import ChairMerger
+from protocol import messages
+from protocol.session import Agent
+
+NO_GATE = math.inf  # the hub gated the correction already, against the same pose
+
+
+class ChairEdge:
+    """`push(batch) -> [EstimatedPose | ImpactEvent]`, `correct(correction)`, `flush()`."""
+
+    def __init__(self, agent: Agent, pose_rate_hz: float = 50.0, method: str = "reckon"):
+        if not pose_rate_hz > 0:
+            raise ValueError(f"pose_rate_hz {pose_rate_hz}: must be > 0")
+        self.agent = agent
+        self.settings = ChairSettings(wheel_diameter_m=agent.wheel_diameter_m, camber_deg=agent.camber_deg)
+        self.merger = ChairMerger(agent)
+        self.method = method
+        self.period_ns = int(1e9 / pose_rate_hz)
+        self.packed_settings = kernel.pack_settings(self.settings)
+        # load (or compile) the kernel now, not on the first sample of a live stream
+        kernel.run_batch(self.packed_settings, np.zeros(kernel.STATE_SIZE), np.zeros(0, dtype=np.int64),
+                         np.zeros((0, kernel.SAMPLE_WIDTH)))
+        self.vector: np.ndarray | None = None  # the filter state, packed (fixed size)
+        self.next_pose_ns = 0
+        self.corrections: deque[Any] = deque(maxlen=64)  # the hub sends a few per minute
+        self.correction_sequence = 0
+        self.samples = self.poses = self.impacts = self.corrections_applied = 0
+
+    @property
+    def state(self) -> ChairState | None:
+        return None if self.vector is None else kernel.unpack_state(self.vector)
+
+    def push(self, batch: Any) -> list[Any]:
+        return self._estimate(self.merger.push_batch(batch))
+
+    def flush(self) -> list[Any]:
+        return self._estimate(self.merger.flush())
+
+    def correct(self, correction: Any) -> None:
+        """Queue a hub Correction; it is applied before the next sample (or with the next pose)."""
+        self.corrections.append(correction)
+
+    def pose(self, time_ns: int | None = None) -> Any:
+        """The current pose as a message (None before the first sample)."""
+        if self.vector is None:
+            return None
+        self._apply_corrections()
+        v = self.vector
+        mean = v[kernel.MEAN:kernel.MEAN + 3]
+        cov = v[kernel.COV:kernel.COV + N * N].reshape(N, N)[:3, :3]
+        return messages.new(
+            "EstimatedPose", timestamp_ns=kernel.state_time_ns(v) if time_ns is None else time_ns,
+            agent_id=self.agent.id, x_m=float(mean[0]), y_m=float(mean[1]), heading_rad=float(mean[2]),
+            covariance=cov.ravel().tolist(), method=self.method, track=messages.Track.LIVE,
+            correction_sequence=self.correction_sequence)
+
+    def _apply_corrections(self) -> None:
+        while self.corrections and self.vector is not None:
+            correction = self.corrections.popleft()
+            if correction.sequence <= self.correction_sequence:
+                continue  # a duplicate (the hub resends after a restart)
+            state = kernel.unpack_state(self.vector)
+            shift = np.array([correction.dx_m, correction.dy_m])
+            covariance = np.array(correction.covariance, dtype=float).reshape(2, 2)
+            state, _ = position_update(state, state.mean[:2] + shift, covariance, NO_GATE)
+            self.vector = kernel.pack_state(state)
+            self.correction_sequence = correction.sequence
+            self.corrections_applied += 1
+
+    def _estimate(self, samples: list) -> list[Any]:
+        out: list[Any] = []
+        if not samples:
+            return out
+        if self.vector is None:
+            first = samples[0]
+            self.vector = kernel.pack_state(start(self.settings, first, self.agent.start_x_m, self.agent.start_y_m,
+                                                  self.agent.start_heading_rad))
+            self.samples += 1
+            samples = samples[1:]
+            if not samples:
+                return out
+        self._apply_corrections()
+        times, values = kernel.pack_samples(samples)
+        self.samples += len(samples)
+        begin = 0
+        for i, time_ns in enumerate(times.tolist()):  # run up to each pose, then publish it
+            if time_ns < self.next_pose_ns and i < len(samples) - 1:
+                continue
+            self.vector, flags = kernel.run_batch(self.packed_settings, self.vector, times[begin:i + 1],
+                                                  values[begin:i + 1])
+            for j in np.flatnonzero(flags & Flag.IMPACT):
+                self.impacts += 1
+                accel = values[begin + j, 3:6]
+                out.append(messages.new("ImpactEvent", timestamp_ns=int(times[begin + j]), agent_id=self.agent.id,
+                                        sensor_id=self.merger.seat_id, peak_g=float(np.sqrt(accel @ accel) - 1.0)))
+            begin = i + 1
+            if time_ns >= self.next_pose_ns:  # a fixed schedule: timestamp jitter costs no pose
+                self.next_pose_ns = max(self.next_pose_ns + self.period_ns, time_ns - self.period_ns // 2)
+                self.poses += 1
+                out.append(self.pose(time_ns))
+        return out

@@ -1,0 +1,558 @@
+"""The per-chair filter compiled for throughput: `chair_estimator.step` over a whole batch at once.
+
+Why: one Python `step` costs ~17 us (~60k samples/s), and the edge estimator's target in replay
+is >= 1 M samples/s per core. `run_batch` is a numba loop over flat arrays, with no allocation
+per sample, that does what calling `step` once per sample does: the same math in the same
+order (zero-rate update, gap bridging by the wheel-turn ratio, impact shove, BACKWARDS samples,
+the magnetometer aid). `chair_estimator.step` stays the readable reference: change the filter
+there first, then here; tests/edge/test_chair_kernel.py holds the kernel to it.
+
+Same operations in the same order round the same, so the two agree bit for bit (measured on
+x86-64, Python 3.11, numpy 2.4 with its bundled OpenBLAS 0.3.31), and elsewhere in the last bits:
+- Python's `x ** 2` is libm's pow(x, 2.0), which differs from x * x in the last bit for ~0.1 %
+  of values: the kernel calls pow too (`_pow2`), never letting LLVM turn it into x * x.
+- numpy hands the 7x7 products and the 3x3 solve to OpenBLAS, whose small-matrix kernels sum
+  each dot product in index order with fused multiply-adds: the kernel does the same (`_fma`),
+  skipping only the Jacobian's structural zeros, which add nothing there either. Another BLAS
+  build or CPU may sum in another order: ~1e-14 apart after a game (the tests allow 1e-9).
+- The eigenvalue check repeats LAPACK's 2x2 formula (dlae2), as numpy's eigvalsh runs it.
+- Python 3.12's sum() of floats is compensated; the kernel sums plainly, as 3.11 does.
+
+The first call compiles (a few seconds); `cache=True` keeps the machine code in __pycache__.
+
+Flat layouts (all float64): a state vector (`pack_state`, `STATE_SIZE` long, whatever the
+number of steps), a settings vector (`pack_settings`: what `step` reads, with its constant
+sub-expressions evaluated once in Python exactly as `step` writes them), and per sample one
+int64 time plus a row of `SAMPLE_WIDTH` values (`pack_samples`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
+
+from edge.chair.estimator import (BIAS, DEG, GYRO_SCALE, HEADING, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings,
+                                  ChairState, Flag, MagAid)
+
+# --- state vector --------------------------------------------------------------------------
+TIME_HIGH = 0  # time_ns >> 32 and time_ns & 0xFFFFFFFF: each exact in a float64, the whole is not
+TIME_LOW = 1
+MEAN = 2  # N values
+COV = MEAN + N  # N * N values, row-major
+YAW_RATE = COV + N * N
+LEFT_BIAS = YAW_RATE + 1
+RIGHT_BIAS = LEFT_BIAS + 1
+STILL_S = RIGHT_BIAS + 1
+ACCEL_MEAN = STILL_S + 1
+GRAVITY = ACCEL_MEAN + 1  # 3 values
+FLAGS = GRAVITY + 3
+IN_IMPACT = FLAGS + 1  # 0 or 1
+TRAVEL = IN_IMPACT + 1
+TURN_XY = TRAVEL + 1
+TURN_XX = TURN_XY + 1
+MAG_FIT = TURN_XX + 1  # 4 x 4 moments, row-major
+MAG_DUE = MAG_FIT + 16
+MAG_READY = MAG_DUE + 1  # 0 or 1
+MAG_REJECTIONS = MAG_READY + 1
+MAG_INNOVATION = MAG_REJECTIONS + 1
+STATE_SIZE = MAG_INNOVATION + 1
+
+# --- settings vector -----------------------------------------------------------------------
+(S_GAP, S_ACCEL_MEAN_TIME, S_STILL_WHEEL, S_STILL_GYRO, S_STILL_ACCEL, S_STILL_TIME, S_HALF_CIRCUMFERENCE,
+ S_WHEEL_BIAS_TIME, S_WHEEL_TURN_SD, S_GYRO_NOISE_VAR, S_WHEEL_RATE_LIMIT, S_WHEEL_TURN_MEMORY, S_IMPACT_G,
+ S_ALONG_SD, S_ACROSS_SD, S_SHOVE_VAR, S_BIAS_WALK_VAR, S_SCALE_WALK_VAR, S_STILL_RATE_VAR, S_MAG_PERIOD,
+ S_MAG_FIT_FORGET, S_MAG_MIN_SPREAD_SQ, S_MAG_MIN_POINTS, S_MAG_HEADING_VAR, S_MAG_UPDATE_VAR, S_MAG_GATE_CHI2,
+ S_MAG_RECOVER_REJECTIONS) = range(27)
+SETTINGS_SIZE = S_MAG_RECOVER_REJECTIONS + 1
+
+# --- sample rows ---------------------------------------------------------------------------
+V_YAW_RATE, V_LEFT, V_RIGHT, V_ACCEL, V_MAG, V_HAS_MAG = 0, 1, 2, 3, 6, 9  # accel and mag: 3 values each
+SAMPLE_WIDTH = 10
+
+STILL, GAP, BACKWARDS, IMPACT = int(Flag.STILL), int(Flag.GAP), int(Flag.BACKWARDS), int(Flag.IMPACT)
+MAG_USED, MAG_REJECTED = int(Flag.MAG_USED), int(Flag.MAG_REJECTED)
+# rows of the scratch array `run_batch` allocates once: F P's rows X, Y, HEADING; a Kalman gain;
+# h P; the 3 x 5 work of the circle fit's solve
+W_FP, W_GAIN, W_ROW, W_LU, W_ROWS = 0, 3, 4, 5, 8
+LAPACK_EPS = 2.0**-53  # dlamch('E'): relative machine precision as LAPACK defines it
+
+
+def pack_settings(settings: ChairSettings) -> np.ndarray:
+    """What `step` reads of the settings; each constant expression written exactly as in `step`."""
+    s = settings
+    vector = np.zeros(SETTINGS_SIZE)
+    vector[S_GAP] = s.gap_s
+    vector[S_ACCEL_MEAN_TIME] = s.accel_mean_time_s
+    vector[S_STILL_WHEEL] = s.still_wheel_dps
+    vector[S_STILL_GYRO] = s.still_gyro_dps
+    vector[S_STILL_ACCEL] = s.still_accel_g
+    vector[S_STILL_TIME] = s.still_time_s
+    vector[S_HALF_CIRCUMFERENCE] = math.pi * s.wheel_diameter_m * 0.5
+    vector[S_WHEEL_BIAS_TIME] = s.wheel_bias_time_s
+    vector[S_WHEEL_TURN_SD] = s.wheel_turn_sd
+    vector[S_GYRO_NOISE_VAR] = (s.gyro_noise_dps_per_sqrt_hz * DEG) ** 2
+    vector[S_WHEEL_RATE_LIMIT] = s.wheel_rate_limit_dps
+    vector[S_WHEEL_TURN_MEMORY] = s.wheel_turn_memory_s
+    vector[S_IMPACT_G] = s.impact_g
+    vector[S_ALONG_SD] = s.along_track_sd_per_m
+    vector[S_ACROSS_SD] = s.cross_track_sd_per_m
+    vector[S_SHOVE_VAR] = s.impact_shove_sd_m**2
+    vector[S_BIAS_WALK_VAR] = (s.gyro_bias_walk_dps_per_sqrt_s * DEG) ** 2
+    vector[S_SCALE_WALK_VAR] = s.wheel_scale_walk_per_sqrt_s**2
+    vector[S_STILL_RATE_VAR] = (s.still_rate_sd_dps * DEG) ** 2
+    vector[S_MAG_PERIOD] = s.mag_period_s
+    vector[S_MAG_FIT_FORGET] = math.exp(-s.mag_period_s / s.mag_fit_memory_s)
+    vector[S_MAG_MIN_SPREAD_SQ] = s.mag_fit_min_spread**2
+    vector[S_MAG_MIN_POINTS] = s.mag_fit_min_points
+    vector[S_MAG_HEADING_VAR] = (s.mag_heading_sd_deg * DEG) ** 2
+    vector[S_MAG_UPDATE_VAR] = max(s.mag_correlation_s / s.mag_period_s, 1.0) * (s.mag_heading_sd_deg * DEG) ** 2
+    vector[S_MAG_GATE_CHI2] = s.mag_gate_chi2
+    vector[S_MAG_RECOVER_REJECTIONS] = s.mag_recover_rejections
+    return vector
+
+
+def pack_state(state: ChairState) -> np.ndarray:
+    """Everything in a ChairState as `STATE_SIZE` float64s (`unpack_state` is the inverse)."""
+    vector = np.zeros(STATE_SIZE)
+    vector[TIME_HIGH], vector[TIME_LOW] = state.time_ns >> 32, state.time_ns & 0xFFFFFFFF
+    vector[MEAN:MEAN + N] = state.mean
+    vector[COV:COV + N * N] = np.asarray(state.cov, dtype=float).ravel()
+    vector[YAW_RATE] = state.yaw_rate_dps
+    vector[LEFT_BIAS], vector[RIGHT_BIAS] = state.left_bias_dps, state.right_bias_dps
+    vector[STILL_S] = state.still_s
+    vector[ACCEL_MEAN] = state.accel_mean_g
+    vector[GRAVITY:GRAVITY + 3] = state.gravity
+    vector[FLAGS] = int(state.flags)
+    vector[IN_IMPACT] = state.in_impact
+    vector[TRAVEL] = state.travel_m
+    vector[TURN_XY], vector[TURN_XX] = state.turn_xy, state.turn_xx
+    vector[MAG_FIT:MAG_FIT + 16] = np.asarray(state.mag.fit, dtype=float).ravel()
+    vector[MAG_DUE] = state.mag.due_s
+    vector[MAG_READY] = state.mag.ready
+    vector[MAG_REJECTIONS] = state.mag.rejections
+    vector[MAG_INNOVATION] = state.mag.innovation_deg
+    return vector
+
+
+def unpack_state(vector: np.ndarray) -> ChairState:
+    if vector.shape != (STATE_SIZE,):
+        raise ValueError(f"a packed chair state has {STATE_SIZE} values, not shape {vector.shape}")
+    v = vector
+    mag = MagAid(v[MAG_FIT:MAG_FIT + 16].reshape(4, 4).copy(), float(v[MAG_DUE]), bool(v[MAG_READY]),
+                 int(v[MAG_REJECTIONS]), float(v[MAG_INNOVATION]))
+    return ChairState(_time_ns(v), v[MEAN:MEAN + N].copy(), v[COV:COV + N * N].reshape(N, N).copy(),
+                      float(v[YAW_RATE]), float(v[LEFT_BIAS]), float(v[RIGHT_BIAS]), float(v[STILL_S]),
+                      float(v[ACCEL_MEAN]), tuple(float(g) for g in v[GRAVITY:GRAVITY + 3]), Flag(int(v[FLAGS])),
+                      bool(v[IN_IMPACT]), float(v[TRAVEL]), float(v[TURN_XY]), float(v[TURN_XX]), mag)
+
+
+def pack_samples(samples: list[ChairSample]) -> tuple[np.ndarray, np.ndarray]:
+    """(times int64 (n,), values float64 (n, SAMPLE_WIDTH)); a missing magnetometer is NaN, has_mag 0."""
+    times = np.fromiter((s.time_ns for s in samples), dtype=np.int64, count=len(samples))
+    nan3 = (math.nan, math.nan, math.nan)
+    values = np.array([(s.yaw_rate_dps, s.left_rotation_deg, s.right_rotation_deg, *s.accel_g,
+                        *(nan3 if s.mag_gauss is None else s.mag_gauss), 0.0 if s.mag_gauss is None else 1.0)
+                       for s in samples], dtype=float).reshape(len(samples), SAMPLE_WIDTH)
+    return times, values
+
+
+def step_batch(settings: ChairSettings, state: ChairState, samples: list[ChairSample]) -> tuple[ChairState, np.ndarray]:
+    """`step` over `samples` in turn: (final state, each sample's flags as int64)."""
+    times, values = pack_samples(samples)
+    vector, flags = run_batch(pack_settings(settings), pack_state(state), times, values)
+    return unpack_state(vector), flags
+
+
+def state_time_ns(vector: np.ndarray) -> int:
+    """The time of a packed state."""
+    return _time_ns(vector)
+
+
+def _time_ns(vector: np.ndarray) -> int:
+    return (int(vector[TIME_HIGH]) << 32) + int(vector[TIME_LOW])
+
+
+# --- compiled part -------------------------------------------------------------------------
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """a * b + c rounded once, as OpenBLAS's kernels accumulate."""
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+    return types.float64(types.float64, types.float64, types.float64), codegen
+
+
+@intrinsic
+def _pow2(typingctx, x):
+    """libm pow(x, 2.0), which is what Python's `x ** 2` computes (not always x * x).
+
+    Declared `nobuiltin` so that LLVM keeps the call instead of rewriting it as x * x.
+    """
+    def codegen(context, builder, signature, args):
+        double = ir.DoubleType()
+        pow_fn = builder.module.globals.get("pow")
+        if pow_fn is None:
+            pow_fn = ir.Function(builder.module, ir.FunctionType(double, [double, double]), name="pow")
+        pow_fn.attributes.add("nobuiltin")
+        return builder.call(pow_fn, [args[0], ir.Constant(double, 2.0)])
+    return types.float64(types.float64), codegen
+
+
+# Helpers run in the per-sample path are inlined (numba IR): a call passing numba arrays costs
+# more than the arithmetic of the small ones, ~40 % of the loop's time in all.
+
+@njit(cache=True)
+def run_batch(settings: np.ndarray, state: np.ndarray, times: np.ndarray,
+              values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Step a packed state through every sample: (new packed state, each sample's flags).
+
+    `state` is not written to; batches may be split anywhere (feed each result to the next).
+    """
+    if (settings.shape[0] != SETTINGS_SIZE or state.shape[0] != STATE_SIZE or values.shape[0] != times.shape[0]
+            or values.shape[1] != SAMPLE_WIDTH):
+        raise ValueError("run_batch: arrays not as pack_settings, pack_state and pack_samples make them")
+    out = state.copy()
+    flags = np.zeros(times.shape[0], dtype=np.int64)
+    mean = out[MEAN:MEAN + N]  # views: the loop updates `out` in place
+    cov = out[COV:COV + N * N].reshape((N, N))
+    fit = out[MAG_FIT:MAG_FIT + 16].reshape((4, 4))
+    work = np.empty((W_ROWS, N))
+    time_ns = (np.int64(out[TIME_HIGH]) << 32) + np.int64(out[TIME_LOW])
+    for i in range(times.shape[0]):
+        elapsed_ns = times[i] - time_ns
+        if elapsed_ns <= 0:  # the sample is ignored, only the flag changes
+            flags[i] = BACKWARDS
+            out[FLAGS] = BACKWARDS
+            continue
+        flags[i] = _step(settings, out, mean, cov, fit, work, elapsed_ns * 1e-9, values[i])
+        time_ns = times[i]
+    out[TIME_HIGH] = time_ns >> 32
+    out[TIME_LOW] = time_ns & 0xFFFFFFFF
+    return out, flags
+
+
+@njit(cache=True, inline='always')
+def _step(s, st, mean, cov, fit, work, dt, sample):
+    """`chair_estimator.step` for dt > 0, in place on the packed state; returns the flags."""
+    flags = GAP if dt > s[S_GAP] else 0
+    accel_norm = math.sqrt(_sum3(sample[V_ACCEL] * sample[V_ACCEL], sample[V_ACCEL + 1] * sample[V_ACCEL + 1],
+                                 sample[V_ACCEL + 2] * sample[V_ACCEL + 2]))
+    alpha = min(dt / s[S_ACCEL_MEAN_TIME], 1.0)
+    accel_mean = st[ACCEL_MEAN] + alpha * (accel_norm - st[ACCEL_MEAN])
+    yaw_rate = sample[V_YAW_RATE]
+    left_dps, right_dps = sample[V_LEFT] / dt, sample[V_RIGHT] / dt
+    still_now = (abs(left_dps) < s[S_STILL_WHEEL] and abs(right_dps) < s[S_STILL_WHEEL]
+                 and abs(yaw_rate) < s[S_STILL_GYRO] and abs(accel_norm - accel_mean) < s[S_STILL_ACCEL])
+    still_s = st[STILL_S] + dt if still_now else 0.0
+    still = still_s >= s[S_STILL_TIME]
+
+    left = sample[V_LEFT] - st[LEFT_BIAS] * dt
+    right = sample[V_RIGHT] - st[RIGHT_BIAS] * dt
+    base_travel = 0.0 if still else s[S_HALF_CIRCUMFERENCE] * (left + right) / 360.0
+    if still:
+        beta = min(dt / s[S_WHEEL_BIAS_TIME], 1.0)
+        st[LEFT_BIAS] += beta * (left_dps - st[LEFT_BIAS])
+        st[RIGHT_BIAS] += beta * (right_dps - st[RIGHT_BIAS])
+        _blend_gravity(st, sample, beta)
+
+    wheel_difference = right - left
+    gyro_rate = 0.5 * (st[YAW_RATE] + yaw_rate) * DEG - mean[BIAS]
+    if flags & GAP:  # the seat gyro saw nothing in between: the wheels tell the turn
+        turn = st[TURN_XY] / st[TURN_XX] * wheel_difference
+        turn_var = _pow2(s[S_WHEEL_TURN_SD] * turn)
+        d_turn_d_bias = d_turn_d_scale = 0.0
+    else:
+        turn = (1.0 + mean[GYRO_SCALE]) * gyro_rate * dt
+        turn_var = s[S_GYRO_NOISE_VAR] * dt
+        d_turn_d_bias = -(1.0 + mean[GYRO_SCALE]) * dt
+        d_turn_d_scale = gyro_rate * dt
+        if max(abs(left_dps), abs(right_dps)) <= s[S_WHEEL_RATE_LIMIT]:  # not a catch-up after a gap
+            forget = math.exp(-dt / s[S_WHEEL_TURN_MEMORY])
+            st[TURN_XY] = forget * st[TURN_XY] + turn * wheel_difference
+            st[TURN_XX] = forget * st[TURN_XX] + wheel_difference * wheel_difference
+
+    mid = mean[HEADING] + 0.5 * turn
+    travel = mean[SCALE] * base_travel
+    c, sn = math.cos(mid), math.sin(mid)
+    mean[X] += travel * c
+    mean[Y] += travel * sn
+    mean[HEADING] += turn
+    in_impact = accel_norm - 1.0 > s[S_IMPACT_G]
+    shove = in_impact and st[IN_IMPACT] == 0.0  # once per impact, not per sample above the threshold
+    if shove:
+        flags |= IMPACT
+    _propagate_covariance(s, cov, work, c, sn, travel, base_travel, d_turn_d_bias, d_turn_d_scale, turn_var,
+                          shove, dt)
+
+    if still:  # zero-rate update: the seat gyro reads its bias
+        flags |= STILL
+        _bias_update(mean, cov, work, yaw_rate * DEG - mean[BIAS], s[S_STILL_RATE_VAR])
+
+    due = st[MAG_DUE] - dt  # the magnetometer aid updates once every mag period
+    if sample[V_HAS_MAG] == 0.0 or due > 0.0:
+        st[MAG_DUE] = due
+    else:
+        flags |= _magnetometer(s, st, mean, cov, fit, work, sample)
+    st[YAW_RATE] = yaw_rate
+    st[STILL_S] = still_s
+    st[ACCEL_MEAN] = accel_mean
+    st[FLAGS] = flags
+    st[IN_IMPACT] = 1.0 if in_impact else 0.0
+    st[TRAVEL] += abs(travel)
+    return flags
+
+
+@njit(cache=True, inline='always')
+def _propagate_covariance(s, cov, work, c, sn, travel, base_travel, d_turn_d_bias, d_turn_d_scale, turn_var,
+                          shove, dt):
+    """P <- F P F^T + Q in place, touching only what F's sparsity changes.
+
+    F is the identity except in rows X, Y and HEADING, so F P differs from P only in those rows
+    and (F P) F^T from F P only in those columns: 140 multiply-adds instead of 2 x 343. Each
+    sum runs over F's non-zeros in index order with fused multiply-adds, as numpy's BLAS call
+    in the reference does (zero terms add nothing there either).
+    """
+    # F's non-identity entries, as `_propagate_covariance` in the reference builds the Jacobian
+    x_heading, y_heading = -travel * sn, travel * c
+    x_scale, y_scale = base_travel * c, base_travel * sn
+    x_bias, y_bias = -travel * sn * 0.5 * d_turn_d_bias, travel * c * 0.5 * d_turn_d_bias
+    x_gyro, y_gyro = -travel * sn * 0.5 * d_turn_d_scale, travel * c * 0.5 * d_turn_d_scale
+
+    # A = F P: its rows X, Y, HEADING into work, the other rows are P's own
+    for j in range(N):
+        work[W_FP, j] = _fma(x_gyro, cov[GYRO_SCALE, j], _fma(x_scale, cov[SCALE, j], _fma(
+            x_bias, cov[BIAS, j], _fma(x_heading, cov[HEADING, j], cov[X, j]))))
+        work[W_FP + 1, j] = _fma(y_gyro, cov[GYRO_SCALE, j], _fma(y_scale, cov[SCALE, j], _fma(
+            y_bias, cov[BIAS, j], _fma(y_heading, cov[HEADING, j], cov[Y, j]))))
+        work[W_FP + 2, j] = _fma(d_turn_d_scale, cov[GYRO_SCALE, j], _fma(d_turn_d_bias, cov[BIAS, j], cov[HEADING, j]))
+    for j in range(N):
+        cov[X, j], cov[Y, j], cov[HEADING, j] = work[W_FP, j], work[W_FP + 1, j], work[W_FP + 2, j]
+
+    # A F^T: columns X, Y, HEADING of every row
+    for i in range(N):
+        a_x, a_y, a_heading = cov[i, X], cov[i, Y], cov[i, HEADING]
+        a_bias, a_scale, a_gyro = cov[i, BIAS], cov[i, SCALE], cov[i, GYRO_SCALE]
+        cov[i, X] = _fma(a_gyro, x_gyro, _fma(a_scale, x_scale, _fma(a_bias, x_bias, _fma(a_heading, x_heading, a_x))))
+        cov[i, Y] = _fma(a_gyro, y_gyro, _fma(a_scale, y_scale, _fma(a_bias, y_bias, _fma(a_heading, y_heading, a_y))))
+        cov[i, HEADING] = _fma(a_gyro, d_turn_d_scale, _fma(a_bias, d_turn_d_bias, a_heading))
+
+    # + Q: slip along and across the mid-step heading, the gyro's noise, the random walks
+    along = _pow2(s[S_ALONG_SD] * travel)
+    across = _pow2(s[S_ACROSS_SD] * travel)
+    if shove:
+        along += s[S_SHOVE_VAR]
+        across += s[S_SHOVE_VAR]
+    cov[X, X] += along * c * c + across * sn * sn
+    cov[Y, Y] += along * sn * sn + across * c * c
+    cov[X, Y] += (along - across) * c * sn
+    cov[Y, X] += (along - across) * c * sn
+    cov[HEADING, HEADING] += turn_var
+    cov[BIAS, BIAS] += s[S_BIAS_WALK_VAR] * dt
+    cov[SCALE, SCALE] += s[S_SCALE_WALK_VAR] * dt
+
+
+@njit(cache=True, inline='always')
+def _bias_update(mean, cov, work, innovation, noise_var):
+    """The reference's `_scalar_update` for h = e_BIAS: P's column is the gain, its row h P."""
+    variance = cov[BIAS, BIAS] + noise_var
+    gain, row = work[W_GAIN], work[W_ROW]
+    for i in range(N):
+        gain[i] = cov[i, BIAS] / variance
+        row[i] = cov[BIAS, i]
+    for i in range(N):
+        mean[i] += gain[i] * innovation
+        for j in range(N):
+            cov[i, j] -= gain[i] * row[j]
+
+
+@njit(cache=True, inline='always')
+def _magnetometer(s, st, mean, cov, fit, work, sample):
+    """A due magnetometer sample: extend the hard-iron fit, then learn north or correct the heading."""
+    forward, left = _level(sample, st)
+    _fit_add(fit, forward, left, s[S_MAG_FIT_FORGET])
+    st[MAG_DUE] = s[S_MAG_PERIOD]
+    found, centre_x, centre_y = _fit_centre(fit, work[W_LU:W_LU + 3], s[S_MAG_MIN_SPREAD_SQ], s[S_MAG_MIN_POINTS])
+    if not found:
+        return 0
+    angle = math.atan2(left - centre_y, forward - centre_x)  # = north - heading
+    if st[MAG_READY] == 0.0 or st[MAG_REJECTIONS] >= s[S_MAG_RECOVER_REJECTIONS]:
+        # (re)learn north = angle + heading: it inherits the heading's error and all its correlations
+        mean[NORTH] = angle + mean[HEADING]
+        for j in range(N):
+            cov[NORTH, j] = cov[HEADING, j]
+        for i in range(N):
+            cov[i, NORTH] = cov[i, HEADING]
+        cov[NORTH, NORTH] = cov[HEADING, HEADING] + s[S_MAG_HEADING_VAR]
+        st[MAG_READY] = 1.0
+        st[MAG_REJECTIONS] = 0.0
+        return 0
+    innovation = _wrap(angle - (mean[NORTH] - mean[HEADING]))
+    # h = e_NORTH - e_HEADING: every product with h is one exact subtraction, as in numpy
+    gain, row = work[W_GAIN], work[W_ROW]
+    for j in range(N):
+        row[j] = cov[NORTH, j] - cov[HEADING, j]  # h P
+    variance = (row[NORTH] - row[HEADING]) + s[S_MAG_UPDATE_VAR]
+    st[MAG_INNOVATION] = innovation / DEG
+    if innovation * innovation / variance > s[S_MAG_GATE_CHI2]:
+        st[MAG_REJECTIONS] += 1.0
+        return MAG_REJECTED
+    for i in range(N):
+        gain[i] = (cov[i, NORTH] - cov[i, HEADING]) / variance
+    for i in range(N):
+        mean[i] += gain[i] * innovation
+        for j in range(N):
+            cov[i, j] -= gain[i] * row[j]
+    st[MAG_REJECTIONS] = 0.0
+    return MAG_USED
+
+
+@njit(cache=True, inline='always')
+def _sum3(a, b, c):
+    return 0.0 + a + b + c  # as Python's sum() (3.11): from 0, in order
+
+
+@njit(cache=True)
+def _wrap(angle):
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi  # numba's float % follows Python's sign rule
+
+
+@njit(cache=True, inline='always')
+def _blend_gravity(st, sample, weight):
+    """The reference's `_blend_unit` of the stored gravity towards this sample's accel, in place."""
+    b0 = st[GRAVITY] + weight * (sample[V_ACCEL] - st[GRAVITY])
+    b1 = st[GRAVITY + 1] + weight * (sample[V_ACCEL + 1] - st[GRAVITY + 1])
+    b2 = st[GRAVITY + 2] + weight * (sample[V_ACCEL + 2] - st[GRAVITY + 2])
+    norm = math.sqrt(_sum3(b0 * b0, b1 * b1, b2 * b2))
+    if norm == 0.0:
+        norm = 1.0
+    st[GRAVITY], st[GRAVITY + 1], st[GRAVITY + 2] = b0 / norm, b1 / norm, b2 / norm
+
+
+@njit(cache=True)
+def _level(sample, st):
+    """The field's horizontal part in chair (forward, left) axes, using the still-measured gravity."""
+    f0, f1, f2 = sample[V_MAG], sample[V_MAG + 1], sample[V_MAG + 2]
+    u0, u1, u2 = st[GRAVITY], st[GRAVITY + 1], st[GRAVITY + 2]
+    along_up = _sum3(f0 * u0, f1 * u1, f2 * u2)
+    h0, h1, h2 = f0 - along_up * u0, f1 - along_up * u1, f2 - along_up * u2
+    # forward axis levelled: chair x with its vertical part removed
+    w0, w1, w2 = 1.0 - u0 * u0, -u0 * u1, -u0 * u2
+    norm = math.sqrt(_sum3(w0 * w0, w1 * w1, w2 * w2))
+    if norm == 0.0:
+        norm = 1.0
+    w0, w1, w2 = w0 / norm, w1 / norm, w2 / norm
+    l0, l1, l2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+    return _sum3(h0 * w0, h1 * w1, h2 * w2), _sum3(h0 * l0, h1 * l1, h2 * l2)
+
+
+@njit(cache=True)
+def _fit_add(fit, x, y, forget):
+    vector = (x, y, 1.0, _pow2(x) + _pow2(y))
+    for i in range(4):
+        for j in range(4):
+            fit[i, j] = forget * fit[i, j] + vector[i] * vector[j]
+
+
+@njit(cache=True)
+def _fit_centre(fit, lu, min_spread_sq, min_points):
+    """(found, centre x, centre y) of the circle x^2 + y^2 = a x + b y + c fitted to the moments.
+
+    Not found until the points spread around the circle: the smaller principal spread of the
+    points must reach `min_spread` of the radius (a full circle gives 1/sqrt(2) = 0.71).
+    """
+    weight = fit[2, 2]
+    if weight < min_points:
+        return False, 0.0, 0.0
+    mean_x, mean_y = fit[0, 2] / weight, fit[1, 2] / weight
+    scatter_xx = fit[0, 0] / weight - mean_x * mean_x
+    scatter_yx = fit[1, 0] / weight - mean_y * mean_x
+    scatter_yy = fit[1, 1] / weight - mean_y * mean_y
+    solved, a, b, c = _solve3(fit, lu)
+    if not solved:
+        return False, 0.0, 0.0
+    centre_x, centre_y = a / 2.0, b / 2.0
+    radius_sq = c + _pow2(centre_x) + _pow2(centre_y)
+    smallest = _smallest_eigenvalue(scatter_xx, scatter_yx, scatter_yy)
+    if radius_sq <= 0.0 or 2.0 * smallest < min_spread_sq * radius_sq:
+        return False, 0.0, 0.0
+    return True, centre_x, centre_y
+
+
+@njit(cache=True)
+def _solve3(fit, lu):
+    """fit[:3, :3] z = fit[:3, 3] as OpenBLAS's dgesv does it (numpy's solve); not solved if singular.
+
+    Left-looking LU with partial pivoting (getf2: the first largest |pivot|, the column below it
+    scaled by its reciprocal), then the two triangular solves (trsv: axpy updates, division by
+    the diagonal), with multiply-adds fused where OpenBLAS's kernels fuse them. `lu` (3 x 5) is
+    scratch: the matrix, then the right-hand side, then each row's pivot.
+    """
+    for i in range(3):
+        for k in range(4):
+            lu[i, k] = fit[i, k]
+    for j in range(3):
+        for i in range(j):  # the earlier row swaps, applied to this column
+            p = int(lu[i, 4])
+            lu[i, j], lu[p, j] = lu[p, j], lu[i, j]
+        if j == 1:  # the column less L times U above it
+            lu[1, 1] -= lu[1, 0] * lu[0, 1]
+            lu[2, 1] -= lu[2, 0] * lu[0, 1]
+        elif j == 2:
+            lu[1, 2] -= lu[1, 0] * lu[0, 2]
+            lu[2, 2] -= _fma(lu[2, 1], lu[1, 2], lu[2, 0] * lu[0, 2])
+        p = j
+        for r in range(j + 1, 3):
+            if abs(lu[r, j]) > abs(lu[p, j]):
+                p = r
+        lu[j, 4] = p
+        if lu[p, j] == 0.0:
+            return False, 0.0, 0.0, 0.0
+        reciprocal = 1.0 / lu[p, j]
+        for k in range(j + 1):  # swap the rows so far (not the right-hand side, not the pivots)
+            lu[j, k], lu[p, k] = lu[p, k], lu[j, k]
+        for r in range(j + 1, 3):
+            lu[r, j] *= reciprocal
+    for i in range(3):  # the right-hand side: row swaps, then L (unit diagonal), then U
+        p = int(lu[i, 4])
+        lu[i, 3], lu[p, 3] = lu[p, 3], lu[i, 3]
+    for i in range(3):
+        for k in range(i + 1, 3):
+            lu[k, 3] = _fma(-lu[i, 3], lu[k, i], lu[k, 3])
+    for i in range(2, -1, -1):
+        lu[i, 3] = lu[i, 3] / lu[i, i]
+        for k in range(i):
+            lu[k, 3] = _fma(-lu[i, 3], lu[k, i], lu[k, 3])
+    return True, lu[0, 3], lu[1, 3], lu[2, 3]
+
+
+@njit(cache=True)
+def _smallest_eigenvalue(d1, e, d2):
+    """Smaller eigenvalue of [[d1, e], [e, d2]] as numpy's eigvalsh gets it (LAPACK dsterf, dlae2)."""
+    if abs(e) <= math.sqrt(abs(d1)) * math.sqrt(abs(d2)) * LAPACK_EPS:
+        return min(d1, d2)  # already diagonal to working precision
+    e_sq = e * e
+    if e_sq <= (LAPACK_EPS * LAPACK_EPS) * abs(d1 * d2):
+        return min(d1, d2)
+    b = math.sqrt(e_sq)
+    a, c = (d2, d1) if abs(d2) < abs(d1) else (d1, d2)  # dsterf's QR or QL orientation
+    sm, adf, ab = a + c, abs(a - c), abs(b + b)
+    acmx, acmn = (a, c) if abs(a) > abs(c) else (c, a)
+    if adf > ab:
+        rt = adf * math.sqrt(1.0 + (ab / adf) * (ab / adf))
+    elif adf < ab:
+        rt = ab * math.sqrt(1.0 + (adf / ab) * (adf / ab))
+    else:
+        rt = ab * math.sqrt(2.0)
+    if sm < 0.0:
+        rt1 = 0.5 * (sm - rt)
+        rt2 = (acmx / rt1) * acmn - (b / rt1) * b
+    elif sm > 0.0:
+        rt1 = 0.5 * (sm + rt)
+        rt2 = (acmx / rt1) * acmn - (b / rt1) * b
+    else:
+        rt1, rt2 = 0.5 * rt, -0.5 * rt
+    return min(rt1, rt2)

@@ -1,0 +1,1 @@
+"""A pedestrian's phone: steps, walking direction, the magnetometer aid, our dead reckoning, and the paper's (`paper.py`)."""

@@ -1,0 +1,495 @@
+"""The hub's computation for a venue of chairs, without I/O: messages in, messages out.
+
+In: every agent's raw ImuBatch (only for clock offsets), EstimatedPose from its edge,
+ImpactEvent, BeaconSighting, and PositionFix from an operator or a video tracker.
+Out: a live corrected pose per agent as each edge pose arrives, a refined pose once it is `lag_s`
+old (hub/chair/smoother.py), and Correction messages for the edges.
+
+Why corrections go back to the edges: the edge holds the whole state (heading, gyro bias, wheel
+scale), so a position measurement applied there also corrects the heading error that caused the
+drift, which an offset kept at the hub could not. Until an edge's pose says it has taken a
+correction (`correction_sequence`), the hub adds the shift it expects the edge to make.
+
+All times here are venue time: device timestamps plus each device's clock offset (hub/clocks.py).
+- Collisions: impacts above `impact_g` within `pairing_window_s` of the first form a group, closed
+  once every live agent's poses have passed it by `lateness_s`. Every pair in the group is scored
+  by how well the two estimates fit a contact (chi-square with both covariances); pairs inside the
+  gate are taken best first, each chair at most once, so three or more impacts at once still yield
+  their pairs. A pair becomes one relative constraint: each chair gets the measurement of the
+  other's side (exactly the joint update of two independent estimates).
+- Beacons: one fix per pass near a goal, at its strongest sighting (hub/chair/corrections.py).
+- Fixes: an operator's or video position at a time, gated like a beacon fix.
+
+Honest covariance. An edge's covariance is its filter's, and after a run of video fixes it states
+a few centimetres while the chair's true error grows faster than the edge's process noise says
+(slips, shoves, a wrong fix taken): measured on a 120 s game with camera fixes, the live pose's
+squared error was 4.9 times its stated covariance at the median (NEES; 2 if honest), 12 on
+average, so the gate refused correct fixes from well-identified tracks for seconds at a time. The
+hub therefore keeps, per agent, the covariance the edge is missing (`AgentView.extra`): it grows
+with the chair's travel and with time, and shrinks with each correction as the honest update
+(the edge's gain, applied to the edge's covariance + extra) says. The gate of fixes (video and
+an operator's), the published live poses and the identity engine's position cue use the honest
+covariance (edge's + extra). Beacons, contacts and the smoother keep the edge's: without camera
+fixes it is already conservative (NEES median 1.2), and with the honest one there beacon +
+collision got up to 0.01 m worse.
+A video track that the gate keeps refusing with the same offset (`relock_after` fixes in a row
+from one source, agreeing with each other) says the hub's pose is wrong, not the track: its
+offset is added to `extra` and the fix is taken.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections import deque
+from collections.abc import Collection, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hub.chair.corrections import CONTACT_DISTANCE_M, CONTACT_GATE_CHI2, CONTACT_SD_M, beacon_fix
+from hub.clocks import ClockOffsets
+from hub.chair.smoother import FixedLagSmoother
+from protocol import keys, messages
+from protocol.session import AgentKind, Mount, Session
+
+Kind = messages.CorrectionKind
+CORRECTIONS = ("beacon", "collision", "fix", "camera")  # fix: an operator's; camera: identified tracks
+FIX_GATE_CHI2 = 13.8  # 99.9 %, 2 dof
+ACROSS_VARIANCE_M2 = 1e4  # a contact says nothing about the direction across the line between chairs
+HISTORY = 1024  # poses kept per agent for looking back to a measured time (20 s at 50 Hz)
+GAP_S = 0.2  # poses further apart than this are a gap (the edge publishes at 50 Hz)
+STALE_MPS = 2.0  # a chair's typical speed (a 10-chair game: 150-200 m in 120 s): how a pose's doubt grows with its age
+
+
+@dataclass(frozen=True)
+class HubSettings:
+    lag_s: float = 30.0  # refined poses leave this late (a pass near a goal every 10-30 s)
+    pose_rate_hz: float = 50.0  # of the edges; sizes the smoother's ring
+    corrections: Collection[str] = CORRECTIONS  # kept as a tuple in CORRECTIONS' order (below)
+    impact_g: float = 6.0  # lower than the paper's 8 g: the gate, not the threshold, rejects false pairs
+    pairing_window_s: float = 0.5
+    lateness_s: float = 1.0  # how long a group waits for the other chairs' impacts to arrive
+    stale_s: float = 5.0  # an agent silent this long (hub clock) no longer holds the others back
+    pass_floor_dbm: float = -72.0  # sightings weaker than this (about 4 m from a goal) are not a pass
+    pass_end_s: float = 1.5  # a pass ends after this long without a sighting above the floor
+    extra_m2_per_m: float = 0.003  # covariance the edge is missing, per metre travelled (per axis)
+    extra_m2_per_s: float = 0.0005  # ... and per second (shoves and slips without wheel travel)
+    extra_max_m2: float = 0.09  # ... up to this: what it stands for (slips, shoves, a fix's timing) is bounded
+    relock_after: int = 2  # video fixes in a row from one source refused with one offset: the pose is wrong
+    relock_agree_m: float = 0.4  # ... their offsets this close to their mean
+    relock_within_s: float = 6.0  # ... all within this long
+
+    def __post_init__(self) -> None:
+        unknown = set(self.corrections) - set(CORRECTIONS)
+        if unknown:
+            raise ValueError(f"corrections {sorted(unknown)}: not among {', '.join(CORRECTIONS)}")
+        # A tuple in a fixed order, not a set: a set's order depends on how it was built, so a hub
+        # restored from a snapshot would pickle differently from the same hub that never stopped.
+        object.__setattr__(self, "corrections", tuple(c for c in CORRECTIONS if c in set(self.corrections)))
+        if not (0 <= self.lag_s < math.inf and 0 < self.pose_rate_hz < math.inf):  # refuses NaN too
+            raise ValueError(f"lag_s {self.lag_s} must be finite and >= 0, pose_rate_hz {self.pose_rate_hz} finite and > 0")
+
+
+@dataclass
+class _Pass:
+    peak_rssi: float
+    peak_ns: int
+    last_ns: int
+
+
+@dataclass
+class AgentView:
+    """What the hub knows of one agent."""
+
+    agent_id: str
+    seat_id: str
+    smoother: FixedLagSmoother
+    history: deque = field(default_factory=lambda: deque(maxlen=HISTORY))  # (time, xy, cov 2x2) live
+    latest_ns: int | None = None  # venue time of the newest pose
+    arrival_ns: int = 0  # hub clock when its last message came
+    covariance: np.ndarray = field(default_factory=lambda: np.eye(3))
+    pending: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (sequence, expected shift)
+    sequence: int = 0  # last Correction sent
+    acknowledged: int = 0
+    passes: dict[str, _Pass] = field(default_factory=dict)  # open, per beacon
+    ended: deque = field(default_factory=lambda: deque(maxlen=16))  # (beacon, pass) awaiting poses past the peak
+    fixes: deque = field(default_factory=lambda: deque(maxlen=16))  # PositionFix awaiting poses past its time
+    applied: dict[str, int] = field(default_factory=lambda: {name: 0 for name in CORRECTIONS})
+    poses: int = 0
+    extra: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)))  # covariance the edge is missing
+    last_edge: tuple[int, float, float, int] | None = None  # (venue time, x, y, correction sequence) as sent
+    refused_source: str = ""  # the video source whose fixes were refused in a row, most recent last
+    refused: list = field(default_factory=list)  # ... as [(time, offset)]
+
+    def _last_at(self, time_ns: int) -> int | None:
+        """Index in `history` of the last pose not after `time_ns` (None: all are after it)."""
+        return next((k for k in range(len(self.history) - 1, -1, -1) if self.history[k][0] <= time_ns), None)
+
+    def pose_at(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """Live position and its covariance at `time_ns` (the last pose not after it; the first if none)."""
+        if not self.history:
+            return None
+        _, xy, cov = self.history[self._last_at(time_ns) or 0]
+        return xy, cov
+
+    def pose_bridged(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """As pose_at, but inside a gap of more than GAP_S between two poses (the link stalled) the position
+        is interpolated between them and its covariance grows with the gap (the chair may have turned):
+        a fix that falls in the gap is not compared with where the chair was before it."""
+        after = self._last_at(time_ns)
+        if after is None or after + 1 >= len(self.history):
+            return self.pose_at(time_ns)
+        (t0, xy0, cov0), (t1, xy1, cov1) = self.history[after], self.history[after + 1]
+        if (t1 - t0) * 1e-9 <= GAP_S:
+            return xy0, cov0
+        w = (time_ns - t0) / (t1 - t0)
+        spread = STALE_MPS * min(time_ns - t0, t1 - time_ns) * 1e-9
+        return (1 - w) * xy0 + w * xy1, np.maximum(cov0, cov1) + spread**2 * np.eye(2)
+
+
+@dataclass
+class HubCounters:
+    impacts: int = 0
+    groups: int = 0
+    pairs: int = 0
+    gated_out: int = 0  # candidate corrections the gate rejected
+    relocks: int = 0  # video fixes taken after a run of consistent refusals
+    late_impacts: int = 0  # arrived after their window had closed: paired with later ones only
+
+
+class ChairHub:
+    def __init__(self, session: Session, settings: HubSettings = HubSettings()):
+        self.session = session
+        self.settings = settings
+        self.venue = session.venue.name
+        self.clocks = ClockOffsets()
+        self.beacons = {beacon.id: beacon for beacon in session.venue.beacons}
+        ring = int(settings.lag_s * settings.pose_rate_hz) + 2
+        self.agents: dict[str, AgentView] = {}
+        for agent in session.agents:
+            if agent.kind is not AgentKind.WHEELCHAIR:
+                continue  # a swimmer's lengths need no venue-level correction (reckon/processes/hub.py shows them)
+            seat = agent.sensor(Mount.SEAT)
+            self.agents[agent.id] = AgentView(agent.id, seat.id if seat else "", FixedLagSmoother(settings.lag_s, ring))
+        self.impacts: deque[tuple[int, str]] = deque(maxlen=256)
+        self.closed_until_ns = -1
+        self.newest_arrival_ns = 0
+        # The pairing waits until every live agent's poses pass the oldest open impact (+ the hold).
+        # The agents still short of it are found once per oldest impact and leave as they pass, so
+        # a pose costs O(1) instead of a scan of every agent (500 chairs: 25,000 scans a second).
+        self._oldest_impact_ns: int | None = None  # None: to be found again (the set below with it)
+        # A dict used as an ordered set: a set's iteration order depends on its add/discard history,
+        # so a snapshot restored and caught up (reckon/processes/checkpoint.py) would pickle differently.
+        self._short: dict[str, None] = {}
+        self.counters = HubCounters()
+
+    # -- inputs ------------------------------------------------------------------------------
+
+    def on_message(self, message: Any, arrival_ns: int) -> list[Any]:
+        """Any input message and when it arrived (hub clock); returns the messages to publish (`key_for`).
+
+        Arrival times only tell a silent agent from a slow one: an agent whose last message came
+        `stale_s` before the newest arrival no longer holds the collision pairing back.
+        """
+        name = messages.type_name(message)
+        view = self.agents.get(message.agent_id)
+        if view is None:
+            return []
+        view.arrival_ns = arrival_ns
+        self.newest_arrival_ns = max(self.newest_arrival_ns, arrival_ns)
+        if name == "ImuBatch":
+            if message.received_ns and len(message.sample_offset_ns):
+                self.clocks.observe(message.sensor_id, message.timestamp_ns + message.sample_offset_ns[-1],
+                                    message.received_ns)
+            return []
+        if name == "EstimatedPose":
+            return self.on_pose(message)
+        if name == "ImpactEvent":
+            self.on_impact(message)
+        elif name == "BeaconSighting":
+            return self.on_sighting(message)
+        elif name == "PositionFix":
+            return self.on_fix(message)
+        return []
+
+    def on_pose(self, pose: Any) -> list[Any]:
+        view = self.agents[pose.agent_id]
+        time_ns = self.clocks.to_venue(view.seat_id, pose.timestamp_ns)
+        if pose.correction_sequence < view.acknowledged:  # the edge restarted: it holds none of ours
+            view.pending.clear()
+        # The edge holds corrections this hub never made (sent by it before a restart, after its last
+        # checkpoint): number on from them, so the edge does not drop ours as repeats.
+        view.sequence = max(view.sequence, pose.correction_sequence)
+        view.acknowledged = pose.correction_sequence
+        view.pending = [(seq, shift) for seq, shift in view.pending if seq > pose.correction_sequence]
+        xy = np.array([pose.x_m, pose.y_m]) + sum((shift for _, shift in view.pending), np.zeros(2))
+        covariance = np.array(pose.covariance, dtype=float).reshape(3, 3) if len(pose.covariance) == 9 else np.eye(3)
+        view.covariance = covariance
+        self._grow_extra(view, time_ns, pose)
+        view.latest_ns = time_ns if view.latest_ns is None else max(view.latest_ns, time_ns)
+        honest = covariance.copy()
+        honest[:2, :2] += view.extra
+        view.history.append((time_ns, xy, covariance[:2, :2]))
+        view.poses += 1
+        out = [self._pose_message(view, time_ns, xy, pose.heading_rad, honest, messages.Track.LIVE)]
+        out += [self._refined(view, entry) for entry in view.smoother.add(time_ns, xy, pose.heading_rad, covariance)]
+        out += self._end_passes(view)
+        out += self._close_groups(view)
+        return out
+
+    def _grow_extra(self, view: AgentView, time_ns: int, pose: Any) -> None:
+        """The covariance the edge is missing grows with travel and time since the previous pose. A pose
+        holding a new correction jumped: its step is not travel."""
+        last = view.last_edge
+        view.last_edge = (time_ns, pose.x_m, pose.y_m, pose.correction_sequence)
+        if last is None or time_ns <= last[0]:
+            return
+        travel = math.hypot(pose.x_m - last[1], pose.y_m - last[2]) if pose.correction_sequence == last[3] else 0.0
+        grow = self.settings.extra_m2_per_m * travel + self.settings.extra_m2_per_s * (time_ns - last[0]) * 1e-9
+        if grow > 0 and view.extra[0, 0] + view.extra[1, 1] < 2 * self.settings.extra_max_m2:
+            view.extra = view.extra + grow * np.eye(2)
+
+    def on_impact(self, event: Any) -> None:
+        if event.peak_g < self.settings.impact_g or "collision" not in self.settings.corrections:
+            return
+        view = self.agents[event.agent_id]
+        time_ns = self.clocks.to_venue(event.sensor_id or view.seat_id, event.timestamp_ns)
+        self.counters.impacts += 1
+        if time_ns <= self.closed_until_ns:
+            self.counters.late_impacts += 1
+        if self._oldest_impact_ns is not None and (time_ns < self._oldest_impact_ns
+                                                   or len(self.impacts) == self.impacts.maxlen):
+            self._oldest_impact_ns = None  # an older impact, or the oldest falls out of the deque
+        self.impacts.append((time_ns, event.agent_id))
+
+    def on_sighting(self, sighting: Any) -> list[Any]:
+        if "beacon" not in self.settings.corrections or sighting.beacon_id not in self.beacons:
+            return []
+        if sighting.rssi_dbm < self.settings.pass_floor_dbm:
+            return []
+        view = self.agents[sighting.agent_id]
+        time_ns = self.clocks.to_venue(sighting.sensor_id or view.seat_id, sighting.timestamp_ns)
+        current = view.passes.get(sighting.beacon_id)
+        if current is not None and time_ns - current.last_ns > self.settings.pass_end_s * 1e9:
+            view.ended.append((sighting.beacon_id, view.passes.pop(sighting.beacon_id)))
+            current = None
+        if current is None:
+            view.passes[sighting.beacon_id] = _Pass(sighting.rssi_dbm, time_ns, time_ns)
+        else:
+            current.last_ns = max(current.last_ns, time_ns)
+            if sighting.rssi_dbm > current.peak_rssi:
+                current.peak_rssi, current.peak_ns = sighting.rssi_dbm, time_ns
+        return self._end_passes(view)
+
+    def on_fix(self, fix: Any) -> list[Any]:
+        wanted = "camera" if fix.kind == Kind.VIDEO else "fix"
+        if wanted not in self.settings.corrections:
+            return []
+        view = self.agents[fix.agent_id]
+        covariance = np.array(fix.covariance, dtype=float).reshape(2, 2) if len(fix.covariance) == 4 else None
+        if covariance is None or not np.all(np.isfinite(covariance)) or np.linalg.det(covariance) <= 0:
+            raise ValueError(f"PositionFix for {fix.agent_id}: covariance {list(fix.covariance)} is not a 2 x 2 "
+                             "positive-definite matrix")
+        kind = Kind(fix.kind) if fix.kind in (Kind.VIDEO, Kind.MANUAL) else Kind.MANUAL
+        view.fixes.append((fix.timestamp_ns, np.array([fix.x_m, fix.y_m]), covariance, kind, fix.source_id))
+        return self._end_passes(view)
+
+    def flush(self) -> list[Any]:
+        """End of session: refined poses still inside the lag."""
+        return [message for part in self.flush_by_agent() for message in part]
+
+    def flush_by_agent(self) -> Iterator[list[Any]]:
+        """`flush`, one agent at a time: a whole venue's tracks at once are gigabytes (500 chairs x 30 s)."""
+        for view in self.agents.values():
+            yield [self._refined(view, entry) for entry in view.smoother.flush()]
+
+    # -- corrections ---------------------------------------------------------------------------
+
+    def _end_passes(self, view: AgentView) -> list[Any]:
+        """Fixes of passes that are over, once the agent's poses have reached their peaks.
+
+        Pose time, not sighting time, decides: the bus does not keep an agent's sightings and
+        poses in order, and a fix needs the pose the chair had at the peak.
+        """
+        if view.latest_ns is None:
+            return []
+        for beacon_id, current in list(view.passes.items()):
+            if view.latest_ns - current.last_ns > self.settings.pass_end_s * 1e9:
+                view.ended.append((beacon_id, view.passes.pop(beacon_id)))
+        out = []
+        while view.ended and view.ended[0][1].peak_ns <= view.latest_ns:
+            beacon_id, ended = view.ended.popleft()
+            fix = beacon_fix(self.beacons[beacon_id], ended.peak_rssi)
+            if fix is not None:
+                out += self._absolute(view, ended.peak_ns, fix.xy, fix.covariance, Kind.BEACON, beacon_id)
+        while view.fixes and view.fixes[0][0] <= view.latest_ns:
+            out += self._absolute(view, *view.fixes.popleft())
+        return out
+
+    def _absolute(self, view: AgentView, time_ns: int, xy: np.ndarray, covariance: np.ndarray, kind: Kind,
+                  source: str) -> list[Any]:
+        then = view.pose_bridged(time_ns)
+        if then is None:
+            return []
+        shift = xy - then[0]
+        spread = then[1] + covariance + (view.extra if kind in (Kind.VIDEO, Kind.MANUAL) else 0.0)
+        if float(shift @ np.linalg.solve(spread, shift)) > FIX_GATE_CHI2:
+            if kind != Kind.VIDEO or not self._relock(view, time_ns, shift, covariance, source):
+                self.counters.gated_out += 1
+                return []
+        if source == view.refused_source:
+            view.refused.clear()
+        return [self._send(view, time_ns, shift, covariance, kind, source=source)]
+
+    def _relock(self, view: AgentView, time_ns: int, shift: np.ndarray, covariance: np.ndarray, source: str) -> bool:
+        """Whether a refused video fix is taken after all: when its source's last `relock_after` fixes were
+        all refused with offsets that agree, the hub's pose is what is wrong (a track does not follow a
+        chair at a fixed offset unless the pose is off). Then `extra` takes the offset and the fix passes."""
+        s = self.settings
+        if s.relock_after <= 0:
+            return False
+        if source != view.refused_source:  # "in a row": another source's refusals are another story
+            view.refused_source, view.refused = source, []
+        runs = view.refused
+        runs.append((time_ns, shift))
+        del runs[:-s.relock_after]
+        if len(runs) < s.relock_after or time_ns - runs[0][0] > s.relock_within_s * 1e9:
+            return False
+        offsets = np.array([offset for _, offset in runs])
+        mean = offsets.mean(axis=0)
+        if np.hypot(*(offsets - mean).T).max() > s.relock_agree_m:
+            return False
+        view.extra = view.extra + np.outer(shift, shift)
+        self.counters.relocks += 1
+        return True
+
+    def _watermark(self) -> int | None:
+        """Venue time every live agent's poses have reached."""
+        stale_ns = self.settings.stale_s * 1e9
+        latest = [v.latest_ns for v in self.agents.values()
+                  if v.latest_ns is not None and self.newest_arrival_ns - v.arrival_ns <= stale_ns]
+        return min(latest) if latest else None
+
+    def _close_groups(self, posed: AgentView) -> list[Any]:
+        """Pair the impact groups every live agent's poses have passed (called with every pose)."""
+        if not self.impacts:
+            return []
+        window_ns = int(self.settings.pairing_window_s * 1e9)
+        hold_ns = window_ns + self.settings.lateness_s * 1e9
+        if self._live_agent_short(posed, hold_ns):
+            return []  # the usual case: nothing to close yet
+        watermark = self._watermark()
+        if watermark is None or min(self.impacts)[0] + hold_ns > watermark:
+            return []  # the usual case: nothing to close yet
+        ordered = sorted(self.impacts)
+        out: list[Any] = []
+        while ordered and ordered[0][0] + hold_ns <= watermark:
+            first_ns = ordered[0][0]
+            group = [item for item in ordered if item[0] - first_ns <= window_ns]
+            ordered = ordered[len(group):]
+            self.closed_until_ns = max(self.closed_until_ns, group[-1][0])
+            agents = sorted({agent for _, agent in group})
+            if len(agents) >= 2:
+                self.counters.groups += 1
+                out += self._pair(first_ns, agents)
+        self.impacts = deque(ordered, maxlen=self.impacts.maxlen)
+        self._oldest_impact_ns = None
+        return out
+
+    def _live_agent_short(self, posed: AgentView, hold_ns: float) -> bool:
+        """Whether a live agent's poses are still short of the oldest impact + `hold_ns` (then no
+        group can close: the watermark is below it). `posed` has just moved on; no other agent has."""
+        if self._oldest_impact_ns is None:
+            self._oldest_impact_ns = min(self.impacts)[0]
+            due = self._oldest_impact_ns + hold_ns
+            self._short = {v.agent_id: None for v in self.agents.values() if v.latest_ns is not None and v.latest_ns < due}
+        due = self._oldest_impact_ns + hold_ns
+        if posed.latest_ns < due:
+            self._short[posed.agent_id] = None  # also an agent whose first pose this is
+        else:
+            self._short.pop(posed.agent_id, None)
+        stale_ns = self.settings.stale_s * 1e9
+        return any(self.newest_arrival_ns - self.agents[a].arrival_ns <= stale_ns for a in self._short)
+
+    def _pair(self, time_ns: int, agents: list[str]) -> list[Any]:
+        candidates = []
+        for a, b in itertools.combinations(agents, 2):
+            pose_a, pose_b = self.agents[a].pose_at(time_ns), self.agents[b].pose_at(time_ns)
+            if pose_a is None or pose_b is None:
+                continue
+            delta = pose_a[0] - pose_b[0]
+            distance = float(np.hypot(*delta))
+            if distance < 1e-6:
+                continue
+            unit = delta / distance
+            var_a, var_b = float(unit @ pose_a[1] @ unit), float(unit @ pose_b[1] @ unit)
+            innovation = CONTACT_DISTANCE_M - distance
+            score = innovation * innovation / (var_a + var_b + CONTACT_SD_M**2)
+            if score <= CONTACT_GATE_CHI2:
+                candidates.append((score, a, b, unit, innovation, var_a, var_b))
+            else:
+                self.counters.gated_out += 1
+        out, taken = [], set()
+        for score, a, b, unit, innovation, var_a, var_b in sorted(candidates, key=lambda c: c[0]):
+            if a in taken or b in taken:
+                continue
+            taken |= {a, b}
+            self.counters.pairs += 1
+            across = np.array([-unit[1], unit[0]])
+            for me, other, direction, noise in ((a, b, unit, var_b), (b, a, -unit, var_a)):
+                covariance = (noise + CONTACT_SD_M**2) * np.outer(direction, direction) + ACROSS_VARIANCE_M2 * np.outer(across, across)
+                out.append(self._send(self.agents[me], time_ns, direction * innovation, covariance, Kind.COLLISION,
+                                      other=other))
+        return out
+
+    def _send(self, view: AgentView, time_ns: int, measured: np.ndarray, covariance: np.ndarray, kind: Kind,
+              other: str = "", source: str = "") -> Any:
+        """Record a correction, expect its effect on the live pose, and build the message.
+
+        The edge applies its own gain (from its covariance P); `extra` becomes what the honest posterior
+        of that update (Joseph form, prior P + extra) holds beyond the edge's. Sending a smaller
+        measurement covariance instead, so that the edge would apply the honest gain, also scales the
+        edge's heading update and diverged (a 120 s game without camera: 0.70 -> 9.6 m)."""
+        prior = view.covariance[:2, :2]
+        honest = prior + view.extra
+        gain = prior @ np.linalg.inv(prior + covariance)
+        expected = gain @ measured
+        view.sequence += 1
+        view.pending.append((view.sequence, expected))
+        keep = np.eye(2) - gain
+        after = keep @ prior
+        honest_after = keep @ honest @ keep.T + gain @ covariance @ gain.T
+        view.extra = _psd(honest_after - after)
+        view.covariance = view.covariance.copy()
+        view.covariance[:2, :2] = after
+        view.smoother.correct(time_ns, expected, 0.5 * float(after[0, 0] + after[1, 1]))
+        view.applied[{Kind.VIDEO: "camera", Kind.MANUAL: "fix"}.get(kind, kind.name.lower())] += 1
+        return messages.new("Correction", timestamp_ns=int(time_ns), agent_id=view.agent_id, kind=kind,
+                            dx_m=float(measured[0]), dy_m=float(measured[1]), other_agent_id=other, source_id=source,
+                            sequence=view.sequence, covariance=covariance.ravel().tolist())
+
+    def _refined(self, view: AgentView, entry: tuple) -> Any:
+        time_ns, x, y, heading, covariance = entry
+        return self._pose_message(view, time_ns, (x, y), heading, covariance, messages.Track.REFINED)
+
+    def _pose_message(self, view: AgentView, time_ns: int, xy: Any, heading: float, covariance: np.ndarray,
+                      track: messages.Track) -> Any:
+        return messages.new("EstimatedPose", timestamp_ns=int(time_ns), agent_id=view.agent_id, x_m=float(xy[0]),
+                            y_m=float(xy[1]), heading_rad=float(heading), covariance=covariance.ravel().tolist(),
+                            method="reckon", track=track, correction_sequence=view.sequence)
+
+    def key_for(self, message: Any) -> str:
+        """Where an output message goes on the bus."""
+        if messages.type_name(message) == "Correction":
+            return keys.correction(self.venue, message.agent_id)
+        track = "refined" if message.track == messages.Track.REFINED else "live"
+        return keys.pose(self.venue, message.agent_id, track)
+
+
+def _psd(matrix: np.ndarray) -> np.ndarray:
+    """The nearest symmetric positive semi-definite matrix (eigenvalues below zero to zero)."""
+    values, vectors = np.linalg.eigh(0.5 * (matrix + matrix.T))
+    return (vectors * np.maximum(values, 0.0)) @ vectors.T
+

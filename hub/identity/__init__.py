@@ -1,0 +1,1 @@
+"""Who is which camera track: the streaming engine, its cues, rules and assignment; the paper's permutation search in `paper/`."""

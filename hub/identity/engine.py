@@ -1,0 +1,572 @@
+"""Who is which camera track: streaming association of anonymous tracks with the agents' sensors.
+
+The camera-identity paper (hub/identity/paper/search.py) scores whole fragments offline and tries every
+order of people. Here every hop (HOP_S of camera time) the newest bins of motion cues
+(hub/identity/cues.py) of every live track are compared with every agent's:
+- speed: a chair's dead-reckoned speed, a pedestrian's from its waist activity (the paper's cue);
+- turn rate: gyro about the vertical against the rotation of the track's velocity;
+- moving or still;
+- position: the track against where the agent was last seen or, for a chair, the hub's pose;
+- stature (trackers that report head heights): how much worse the agent's motion has matched tracks
+  of this head height than of its best-matching one, over the session (StatureProfile).
+Each bin gives a normalised squared error per cue (about 1 for the right pair). A pair's evidence
+is the forgetting mean of its bins' costs (factor FORGET_PER_S per second, after a prior that
+makes a new track earn its identity). The assignment is the Hungarian method (scipy) over tracks
+and agents with "nobody" on both sides at NOBODY_COST, the current pairs favoured by
+SWITCH_MARGIN so identities do not flicker. Work per hop is tracks x agents x new bins.
+
+An identified track gives its agent a PositionFix (kind VIDEO) every FIX_EVERY_S while the pair's
+evidence is clear; the hub turns it into a correction like any fix. An agent without a track is
+carried by its own dead reckoning (the hub's pose) until a track matches again.
+The camera's clock offset is searched on the identified chairs every lag_every_s, within max_lag_s
+of lag_prior_s in total (pedestrians' turn rates do not separate pairs: docs/identity.md).
+
+Four rules follow the tracker's own errors (docs/identity.md): continuation of a broken-off track,
+births, encounters and shares. They live in hub/identity/rules.py (`TrackRules`, which IdentityEngine
+inherits, with the track records `_Track` and `_Lost`); this module holds the settings, the counters and
+the engine: inputs, the hop's scoring, the assignment (solved in independent parts), fixes and the
+camera's clock offset.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from hub.clocks import ClockOffsets
+from hub.identity.assign import BIG, components, exclusion_margin, padded, swap_bound
+from hub.identity.cues import (BIN_NS, BIN_S, MOVING_MPS, TRACK_DELAY_BINS, TURN_BINS, AgentCues, StatureProfile,
+                               SpeedModel, TrackCues, agent_hop_blocks, track_hop_cues)
+from hub.identity.rules import START_SD_M as START_SD_M  # re-exported; the birth rule uses it
+from hub.identity.rules import TrackRules, _Lost, _Track
+from protocol import messages
+from protocol.messages import CorrectionKind
+from protocol.session import AgentKind, Mount, Session
+
+METHOD = "reckon"
+# how far a seated head is below the stature: seat + sitting height ~0.52 x stature (docs/simulator-room.md)
+SEATED_DROP_M = (0.33, 0.38, 0.43)
+
+
+@dataclass(frozen=True)
+class IdentitySettings:
+    hop_s: float = 0.2  # 0.5 before the scoring waited for the agents' data (120 s games, seeds 1-3: docs/identity.md)
+    delay_s: float = 0.2  # bins are scored at least this long after the camera saw them, once every live agent's
+    max_delay_s: float = 1.0  # ... data has reached them, but never later than this (a silent device holds none back)
+    forget_per_s: float = 0.7  # evidence half-life about 2 s: a tracker's swap is followed within seconds
+    fast_forget_per_s: float = 0.2  # ... and a fast mean (half-life 0.4 s) that overrides it where recent bins disagree
+    fast_margin: float = 0.5  # ... by more than this (0: a wrong pair claimed on a camera 0.2 s off, tests)
+    pedestrian_forget_per_s: float = 0.8  # ... a pedestrian's (half-life 3.1 s): its cues are weak per bin, and a
+    # room's tracker breaks tracks rather than swapping them
+    prior_bins: float = 4.0  # a new pair starts with this many bins at prior_cost
+    prior_cost: float = 2.0
+    # each side; a pair is taken when its evidence is below twice this. 0.6 before the hub's honest
+    # covariance; now 0.7: 120 s games, seeds 1-3, live 91.9 / 95.4 / 95.9 -> 93.3 / 95.7 / 96.2 %
+    nobody_cost: float = 0.7
+    claim_margin: float = 0.3  # a new identity must be this much better than the best assignment without it
+    max_claims: int = 8  # new identities examined per hop (each costs one more assignment); the rest wait
+    switch_margin: float = 0.4
+    fix_every_s: float = 1.0
+    fix_cost: float = 0.6  # evidence needed to send a fix
+    fix_after_s: float = 2.0  # ... held for this long
+    track_timeout_s: float = 0.3  # a tracker reports every frame; one that comes back gets a new id anyway
+    continue_max_s: float = 5.0  # a new track can continue an agent's track that broke off this long ago (0: never)
+    continue_gate_m: float = 0.7  # ... if it starts this close to where the old track's motion leads
+    continue_spread_mps: float = 1.0  # ... a gate growing this fast with the gap (a chair turns, brakes)
+    continue_coast_s: float = 1.0  # the old track's velocity is extrapolated at most this long
+    continue_margin_m: float = 0.7  # ... and the hub expects no other agent within this much of as close
+    continue_clear_m: float = 0.6  # a new track this close to another live track may be a second detection: no
+    continue_height_m: float = 0.1  # ... nor one whose head height differs from the old track's by more (3 frame sd)
+    birth_sd_m: float = 0.3  # a chair with no track, placed this surely by the hub, names a new track there (0: no)
+    encounter_m: float = 1.3  # tracks this close may swap or merge: evidence from before they met is restarted
+    encounter_keep: float = 0.2  # ... except this share of the holder's own, so its identity holds until beaten
+    share_merges: bool = True  # an agent whose track ends inside a held one shares it until they part
+    share_m: float = 0.6  # ... inside: this close (a merged track sits at its people's centroid)
+    max_lag_s: float = 0.5  # the camera's clock offset is searched within this much of lag_prior_s (an absolute bound)
+    lag_prior_s: float = 0.0  # ... the configured offset (camera stamps minus venue time)
+    lag_every_s: float = 5.0
+    stature_weight: float = 4.0  # per bin, x how much worse the agent's motion matched tracks of this height (0: off)
+    seated_tilt_deg: float = 5.0  # ... except for an agent whose waist leans this far from walking upright (seated)
+    speed_sd_mps: float = 0.35
+    yaw_sd_dps: float = 25.0
+    course_sd_deg: float = 15.0  # a moving track's direction against a chair's dead-reckoned one (0: off)
+    course_min_mps: float = 0.5  # ... compared only while both move at least this fast
+    course_prior_bins: float = 10.0  # ... less the pair's usual angle, which starts at 0 with this weight in bins
+    course_forget_per_s: float = 0.8  # ... and forgets at this rate (half-life 3 s)
+    moving_sd: float = 0.7
+    position_sd_m: float = 0.5  # beyond the camera's own error, for where an agent is expected
+    walk_mps: float = 1.5  # how fast a pedestrian's expected position loses certainty when unseen
+    clip: float = 9.0  # one bin's normalised squared error never counts more than this (3 sigma)
+    position_clip: float = 4.0  # ... nor the hub's pose's (chairs): it can be wrong by metres, the motion cues not
+
+    def __post_init__(self) -> None:
+        checks = {"hop_s": (0.1, 10.0), "delay_s": (0.0, 10.0), "max_delay_s": (0.0, 10.0), "forget_per_s": (0.01, 1.0),
+                  "fast_forget_per_s": (0.0, 1.0), "fast_margin": (0.0, 100.0),
+                  "pedestrian_forget_per_s": (0.01, 1.0), "prior_bins": (0.0, 1e3),
+                  "nobody_cost": (0.0, 100.0), "claim_margin": (0.0, 100.0), "switch_margin": (0.0, 100.0),
+                  "fix_every_s": (0.0, 3600.0), "track_timeout_s": (0.0, 60.0), "max_lag_s": (0.0, 5.0),
+                  "continue_max_s": (0.0, 60.0), "continue_gate_m": (0.0, 100.0), "continue_spread_mps": (0.0, 100.0),
+                  "continue_coast_s": (0.0, 60.0), "continue_clear_m": (0.0, 100.0),
+                  "continue_margin_m": (0.0, 100.0), "birth_sd_m": (0.0, 100.0), "encounter_m": (0.0, 100.0),
+                  "encounter_keep": (0.0, 1.0), "share_m": (0.0, 100.0),
+                  "speed_sd_mps": (1e-3, 10.0), "yaw_sd_dps": (1e-3, 1e3), "moving_sd": (1e-3, 10.0),
+                  "position_sd_m": (1e-3, 100.0), "lag_prior_s": (-5.0, 5.0), "continue_height_m": (0.0, 10.0),
+                  "stature_weight": (0.0, 100.0), "seated_tilt_deg": (0.0, 90.0), "course_sd_deg": (0.0, 180.0),
+                  "course_min_mps": (0.0, 10.0), "course_prior_bins": (0.0, 1e4), "course_forget_per_s": (0.01, 1.0)}
+        for name, (low, high) in checks.items():
+            value = getattr(self, name)
+            if not low <= value <= high:
+                raise ValueError(f"IdentitySettings.{name} = {value}: must be within [{low}, {high}]")
+
+
+@dataclass
+class IdentityCounters:
+    updates: int = 0
+    pair_bins: int = 0  # cue comparisons: tracks x agents x bins, summed over updates
+    max_pair_bins: int = 0  # ... in the largest update
+    solves: int = 0  # assignment problems solved (one per hop, one more per examined new identity)
+    max_assignment_size: int = 0  # the largest padded matrix solved (a part's tracks + agents)
+    screened: int = 0  # new identities refused by the exchange bound, without a solve
+    identity_changes: int = 0
+    continuations: int = 0  # new tracks that inherited a broken-off track's identity at their first frame
+    births: int = 0  # ... of which where the hub placed a chair that had no track (its start, a sure pose)
+    encounters: int = 0  # tracks whose evidence restarted after they met others
+    shares: int = 0  # agents that shared a merged track (its holder's) after their own ended inside it
+    fixes: int = 0
+    frames: int = 0
+    tracks: int = 0
+    lag_bins: int = 0
+
+
+class IdentityEngine(TrackRules):
+    """`on_message(message)` -> outputs (TrackIdentity, PositionFix); `assignment()` now."""
+
+    def __init__(self, session: Session, settings: IdentitySettings = IdentitySettings(),
+                 pose_of: Callable[[str, int], tuple[np.ndarray, float] | None] | None = None):
+        self.settings = settings
+        self.venue = session.venue.name
+        self.pose_of = pose_of  # the hub's (xy, sd) of an agent at a venue time, when it has one
+        self.clocks = ClockOffsets()
+        self.agents: list[AgentCues] = []
+        self.kinds: list[AgentKind] = []
+        for agent in session.agents:
+            sensor = agent.sensor(Mount.SEAT) or agent.sensor(Mount.WAIST) or next(
+                (s for s in agent.sensors if not s.mount.on_wheel), None)
+            if sensor is None or agent.kind is AgentKind.SWIMMER:
+                continue
+            self.agents.append(AgentCues(agent.id, sensor.id, sensor.rate_hz))
+            self.kinds.append(agent.kind)
+        self.index = {cues.agent_id: i for i, cues in enumerate(self.agents)}
+        # where each agent's edge starts its filter (the session's start; 0.1 m sd, edge/chair/estimator.py):
+        # the hub's pose of a chair before its first edge pose has arrived
+        self.start_xy = {self.index[a.id]: np.array([a.start_x_m, a.start_y_m]) for a in session.agents
+                         if a.id in self.index}
+        self.is_chair = np.array([kind is AgentKind.WHEELCHAIR for kind in self.kinds], dtype=bool)
+        self.is_pedestrian = np.array([kind is AgentKind.PEDESTRIAN for kind in self.kinds], dtype=bool)
+        self.by_sensor = {cues.sensor_id: i for i, cues in enumerate(self.agents)}
+        count = len(self.agents)
+        self.seen_xy = np.full((count, 2), np.nan)  # where each agent's track last was
+        self.seen_ns = np.zeros(count, dtype=np.int64)
+        self.speed_model = SpeedModel()
+        self.statures = StatureProfile(count)
+        self.tracks: dict[tuple[str, int], _Track] = {}
+        self.lost: dict[int, _Lost] = {}  # agent -> where its last track broke off (until it holds another)
+        self.scored_until: dict[str, int] = {}  # camera -> first bin not yet scored
+        self.next_lag_bin: dict[str, int] = {}
+        self.lag_bins: dict[str, int] = {}
+        self.counters = IdentityCounters()
+        self.update_s: deque[float] = deque(maxlen=4096)  # wall time of the latest hops (reports, not control)
+        self.delays_s: deque[float] = deque(maxlen=4096)  # ... and how far behind the camera each scored
+
+    # -- inputs ------------------------------------------------------------------------------
+
+    def on_message(self, message: Any) -> list[Any]:
+        name = messages.type_name(message)
+        if name == "CameraFrame":
+            return self.on_frame(message)
+        if name == "ImuBatch":
+            self.on_imu(message)
+        elif name == "EstimatedPose":  # the hub passes only its edges' poses (pose/edge), never its own
+            self.on_edge_pose(message)
+        return []
+
+    def on_imu(self, batch: Any) -> None:
+        i = self.by_sensor.get(batch.sensor_id)
+        if i is None or not len(batch.sample_offset_ns):
+            return
+        if batch.received_ns:
+            self.clocks.observe(batch.sensor_id, batch.timestamp_ns + batch.sample_offset_ns[-1], batch.received_ns)
+        times = batch.timestamp_ns + np.asarray(batch.sample_offset_ns, dtype=np.int64) + self.clocks.offset_ns(batch.sensor_id)
+        self.agents[i].push_imu(times, np.asarray(batch.accel_g, dtype=float).reshape(-1, 3),
+                                np.asarray(batch.gyro_dps, dtype=float).reshape(-1, 3))
+
+    def on_edge_pose(self, pose: Any) -> None:
+        i = self.index.get(pose.agent_id)
+        if i is None:
+            return
+        cues = self.agents[i]
+        cues.push_pose(self.clocks.to_venue(cues.sensor_id, pose.timestamp_ns), pose.x_m, pose.y_m, pose.heading_rad,
+                       pose.correction_sequence)
+
+    def on_frame(self, frame: Any) -> list[Any]:
+        camera = frame.camera_id
+        self.counters.frames += 1
+        lag_ns = self.lag_bins.setdefault(camera, int(round(self.settings.lag_prior_s / BIN_S))) * BIN_NS
+        time_ns = frame.timestamp_ns - lag_ns
+        new = []
+        count = len(frame.track_id)
+        heights = frame.height_m if len(frame.height_m) == count else [float("nan")] * count  # none: no height cue
+        for track_id, x, y, height in zip(frame.track_id, frame.x_m, frame.y_m, heights):
+            key = (camera, int(track_id))
+            track = self.tracks.get(key)
+            if track is None:
+                track = self.tracks[key] = _Track(TrackCues(int(track_id)), np.zeros((2, len(self.agents))),
+                                                  np.zeros((2, len(self.agents))), born_ns=time_ns)
+                self.counters.tracks += 1
+                new.append(key)
+            track.cues.push(time_ns, float(x), float(y), float(height))
+        out = self._continue(camera, new, time_ns) if new else []
+        bin_now = time_ns // BIN_NS
+        first = self.scored_until.setdefault(camera, bin_now)
+        end = self._scored_end(bin_now)
+        if end - first < int(round(self.settings.hop_s / BIN_S)):
+            return out
+        self.scored_until[camera] = end
+        self.delays_s.append((bin_now - end) * BIN_S)
+        started = time.perf_counter()
+        out += self._update(camera, first, end, frame.position_sd_m, time_ns)
+        self.update_s.append(time.perf_counter() - started)
+        return out
+
+    def _scored_end(self, bin_now: int) -> int:
+        """The first bin not to score yet: at least delay_s back, and no further than every live agent's data has
+        reached (its cues are compared TRACK_DELAY_BINS earlier), but at most max_delay_s back. A bin scored
+        before an agent's data is in would count nothing for it, for good."""
+        s = self.settings
+        earliest, latest = bin_now - int(round(s.max_delay_s / BIN_S)), bin_now - int(round(s.delay_s / BIN_S))
+        ready = [a.complete_bin() + 1 + TRACK_DELAY_BINS for a in self.agents]
+        live = [bin_ for bin_ in ready if bin_ > earliest]
+        return max(earliest, min([latest] + live))
+
+    # -- one hop -----------------------------------------------------------------------------
+
+    def _update(self, camera: str, first: int, end: int, camera_sd_m: float, now_ns: int) -> list[Any]:
+        s = self.settings
+        timeout = int(s.track_timeout_s * 1e9)
+        gone = [k for k, t in self.tracks.items() if k[0] == camera and now_ns - t.cues.last_ns > timeout]
+        keys = [k for k in self.tracks if k[0] == camera and k not in set(gone)]
+        shares = self._encounters(gone, keys, first, now_ns)
+        out = [message for k in gone for message in self._drop(k, now_ns)]
+        out += self._share(camera, shares, now_ns)
+        if not keys or not self.agents:
+            return out
+        tracks = [self.tracks[k] for k in keys]
+        count = end - first
+        agent_cues = self._agent_windows(first, count)
+        costs = self._bin_costs(tracks, agent_cues, first, count, camera_sd_m)  # (T, A, bins), NaN = not comparable
+        forget = np.stack([np.where(self.is_pedestrian, s.pedestrian_forget_per_s, s.forget_per_s),
+                           np.full(len(self.agents), s.fast_forget_per_s)]) ** (count * BIN_S)
+        bins = np.arange(first, end)
+        for row, track in enumerate(tracks):
+            valid = np.isfinite(costs[row])
+            if track.since_bin is not None:
+                valid &= bins[None, :] >= track.since_bin[:, None]
+            track.cost_sum = track.cost_sum * forget + np.where(valid, costs[row], 0.0).sum(axis=1)[None]
+            track.cost_count = track.cost_count * forget + valid.sum(axis=1)[None]
+        self.counters.updates += 1
+        work = len(tracks) * len(self.agents) * count
+        self.counters.pair_bins += work
+        self.counters.max_pair_bins = max(self.counters.max_pair_bins, work)
+        evidence = np.array([self._evidence(t) for t in tracks])
+        out += self._assign(camera, keys, tracks, evidence, now_ns)
+        out += self._fixes(camera, tracks, evidence, now_ns, camera_sd_m, end * BIN_NS)
+        self._learn_speed(tracks, evidence, first, count)
+        if end >= self.next_lag_bin.get(camera, end):
+            self.next_lag_bin[camera] = end + int(s.lag_every_s / BIN_S)
+            self._search_lag(camera, tracks, end)
+        return out
+
+    def _evidence(self, track: _Track) -> np.ndarray:
+        """Per agent: the slow mean of its bins' costs on this track (after the prior) or, where recent bins
+        disagree with it, the fast one's: a holder whose recent bins are bad loses the track sooner, and
+        an agent whose recent bins are good is not held back by bad ones from before (a merge, a crowd)."""
+        s = self.settings
+        means = (track.cost_sum + s.prior_cost * s.prior_bins) / (track.cost_count + s.prior_bins)
+        if s.fast_forget_per_s <= 0:
+            return means[0]
+        slow, fast = means
+        return np.minimum(slow, fast + s.fast_margin)
+
+
+    def _agent_windows(self, first: int, count: int) -> dict[str, np.ndarray]:
+        """Every agent's cues for the track bins first..first+count-1 (an agent's are TRACK_DELAY_BINS older)."""
+        b = agent_hop_blocks(self.agents, first, count, TRACK_DELAY_BINS)
+        chair = self.is_chair & np.isfinite(b["speed_dr"]).any(axis=1)
+        # a pedestrian's speed from its activity, already as slow as a fit (no delay)
+        speed = np.where(chair[:, None], b["speed_dr"], self.speed_model.predict(b["activity"]))
+        yaw = np.where(chair[:, None], b["yaw_dr"], b["yaw"])
+        with np.errstate(invalid="ignore"):
+            moving = np.where(np.isfinite(speed), speed > MOVING_MPS, np.nan)
+        return {"speed": speed, "yaw": yaw, "moving": moving, "tilt": b["tilt"],
+                "vx": np.where(chair[:, None], b["vx_dr"], np.nan), "vy": np.where(chair[:, None], b["vy_dr"], np.nan)}
+
+    def _bin_costs(self, tracks: list[_Track], agent: dict[str, np.ndarray], first: int, count: int,
+                   camera_sd_m: float) -> np.ndarray:
+        s = self.settings
+        cues = track_hop_cues([t.cues for t in tracks], first, count)
+        t_speed, t_yaw, t_x, t_y = cues["speed"], cues["yaw"], cues["x"], cues["y"]
+        with np.errstate(invalid="ignore"):
+            t_moving = np.where(np.isfinite(t_speed), t_speed > MOVING_MPS, np.nan)
+
+        def normalised(track_values: np.ndarray, agent_values: np.ndarray, sd: float) -> np.ndarray:
+            return np.minimum(((track_values[:, None, :] - agent_values[None, :, :]) / sd) ** 2, s.clip)
+
+        parts = [normalised(t_speed, agent["speed"], s.speed_sd_mps),
+                 normalised(t_moving, agent["moving"], s.moving_sd),
+                 normalised(t_yaw, agent["yaw"], s.yaw_sd_dps)]
+        if s.course_sd_deg > 0 and np.isfinite(agent["vx"]).any():  # only agents with dead reckoning (chairs) have one
+            parts.append(self._course_cost(tracks, cues["vx"], cues["vy"], agent["vx"], agent["vy"], count))
+        position = self._position_cost(tracks, t_x, t_y, first, count, camera_sd_m)
+        if position is not None:
+            parts.append(position)
+        stack = np.stack(parts)
+        present = np.isfinite(stack)
+        # each cue adds its excess over what the right pair would show on average (1, a normalised
+        # squared error); a bin counts once its speed (both sides) is known
+        excess = np.where(present, stack - 1.0, 0.0).sum(axis=0)
+        if s.stature_weight > 0 and np.isfinite(cues["height"]).any():
+            motion = np.where(present[0], np.where(present[:3], stack[:3] - 1.0, 0.0).sum(axis=0), np.nan)
+            stature = self._stature_cost(cues["height"], agent["tilt"])  # from the bins before these
+            with np.errstate(invalid="ignore"):
+                self.statures.learn(cues["height"], motion, t_speed > MOVING_MPS)
+            excess = excess + np.where(np.isfinite(stature), s.stature_weight * stature, 0.0)
+        return np.where(present[0], excess, np.nan)
+
+    def _stature_cost(self, height_m: np.ndarray, tilt_deg: np.ndarray) -> np.ndarray:
+        """(tracks, agents, bins) from the stature profile; for an agent whose waist says it sits (tilted
+        seated_tilt_deg from walking upright), the profile is read SEATED_DROP_M above the track's head."""
+        stature = self.statures.cost(height_m)
+        with np.errstate(invalid="ignore"):
+            seated = tilt_deg > self.settings.seated_tilt_deg
+        if seated.any():
+            risen = np.fmin.reduce([self.statures.cost(height_m + drop) for drop in SEATED_DROP_M])
+            stature = np.where(seated[None], risen, stature)
+        return stature
+
+    def _course_cost(self, tracks: list[_Track], t_vx: np.ndarray, t_vy: np.ndarray, a_vx: np.ndarray,
+                     a_vy: np.ndarray, count: int) -> np.ndarray:
+        """The angle between a track's velocity and an agent's dead-reckoned one, less the pair's usual angle,
+        (tracks, agents, bins); NaN unless both move. A chair's heading mostly stays within a few degrees of
+        the truth (docs/identity.md), so its direction of travel is nearly absolute: after a crossing the
+        chairs leave in different directions. But a knock can turn it by 20 deg for a minute, and then its
+        own track would look wrong and never be claimed back (a 317 s game: its pose 2-6 m off for 60 s).
+        So each pair learns its usual angle (a forgetting circular mean, shrunk towards 0 by
+        course_prior_bins): steady for the right pair, wandering for a wrong one. Scored against the
+        angle learnt from the bins before these (a bin never judges itself)."""
+        s = self.settings
+        tvx, tvy = t_vx[:, None, :], t_vy[:, None, :]
+        avx, avy = a_vx[None], a_vy[None]
+        angle = np.arctan2(tvx * avy - tvy * avx, tvx * avx + tvy * avy)  # rad, (T, A, bins)
+        with np.errstate(invalid="ignore"):
+            moving = (np.hypot(tvx, tvy) > s.course_min_mps) & (np.hypot(avx, avy) > s.course_min_mps)
+        forget = s.course_forget_per_s ** (count * BIN_S)
+        usual = np.empty((len(tracks), angle.shape[1]))
+        for row, track in enumerate(tracks):
+            if track.course is None:
+                track.course = np.zeros((2, angle.shape[1]))
+            usual[row] = np.arctan2(track.course[1], s.course_prior_bins + track.course[0])
+            ok = moving[row]
+            track.course = track.course * forget + np.stack([np.where(ok, np.cos(angle[row]), 0.0).sum(axis=1),
+                                                             np.where(ok, np.sin(angle[row]), 0.0).sum(axis=1)])
+        residual = np.degrees((angle - usual[:, :, None] + np.pi) % (2 * np.pi) - np.pi)
+        return np.where(moving, np.minimum((residual / s.course_sd_deg) ** 2, s.clip), np.nan)
+
+    def _position_cost(self, tracks: list[_Track], t_x: np.ndarray, t_y: np.ndarray, first: int, count: int,
+                       camera_sd_m: float) -> np.ndarray | None:
+        """Where each agent is expected: a chair where the hub has it; an agent without a track where
+        its last track ended, less certain as time passes. An agent's current track is not compared
+        with where that same track was: that would only confirm whatever identity it has."""
+        s = self.settings
+        times = (np.arange(first, first + count) + 0.5) * BIN_NS
+        expected = np.full((len(self.agents), count, 2), np.nan)
+        sd = np.full((len(self.agents), count), np.nan)
+        clip = np.full((len(self.agents), 1), s.clip)
+        holding = {t.agent for t in self.tracks.values() if t.agent >= 0}
+        for i, cues in enumerate(self.agents):
+            pose = self.pose_of(cues.agent_id, int(times[-1])) if self.pose_of else None
+            if pose is not None:
+                expected[i] = pose[0]
+                sd[i] = np.hypot(pose[1], s.position_sd_m)
+                clip[i] = s.position_clip
+            elif i not in holding and np.isfinite(self.seen_xy[i, 0]):
+                expected[i] = self.seen_xy[i]
+                age_s = np.maximum(times - self.seen_ns[i], 0) * 1e-9
+                sd[i] = np.hypot(s.position_sd_m + s.walk_mps * age_s, camera_sd_m)
+        if not np.isfinite(sd).any():
+            return None
+        dx = t_x[:, None, :] - expected[None, :, :, 0]
+        dy = t_y[:, None, :] - expected[None, :, :, 1]
+        return np.minimum((dx * dx + dy * dy) / (2 * sd[None] ** 2), clip[None])
+
+    def _assign(self, camera: str, keys: list[tuple[str, int]], tracks: list[_Track], evidence: np.ndarray,
+                now_ns: int) -> list[Any]:
+        s = self.settings
+        n_tracks, n_agents = evidence.shape
+        cost = evidence.copy()
+        for row, track in enumerate(tracks):
+            if track.agent >= 0:
+                cost[row, track.agent] -= s.switch_margin
+        held = {t.agent for k, t in self.tracks.items() if k[0] != camera and t.agent >= 0}
+        for i in held:  # an agent another camera holds is not available here
+            cost[:, i] = BIG
+        parts = components(cost, s.nobody_cost)
+        self.counters.solves += 1
+        chosen: dict[int, int] = {}
+        where: dict[int, tuple] = {}  # row -> its part's (matrix, best cost, row in it, agent -> column, solution)
+        for rows_in, cols_in in parts:
+            matrix = padded(cost[np.ix_(rows_in, cols_in)], s.nobody_cost)
+            self.counters.max_assignment_size = max(self.counters.max_assignment_size, len(matrix))
+            rows, cols = linear_sum_assignment(matrix)
+            best = float(matrix[rows, cols].sum())
+            column_of = {int(c): k for k, c in enumerate(cols_in)}
+            for r, c in zip(rows, cols):
+                if r < len(rows_in) and c < len(cols_in):
+                    chosen[int(rows_in[r])] = int(cols_in[c])
+            for k, r in enumerate(rows_in):
+                where[int(r)] = (matrix, best, k, column_of, cols)
+        final: dict[int, int] = {}
+        solves = 0
+        for row, track in enumerate(tracks):
+            agent = chosen.get(row, -1)
+            if agent >= 0 and agent != track.agent:
+                # a new identity must beat every assignment without it by claim_margin: two people
+                # standing still look alike, and no identity is better than a guess
+                matrix, best, k, column_of, solution = where[row]
+                if swap_bound(matrix, solution, k, column_of[agent]) < s.claim_margin:
+                    agent = -1  # one exchange with another pair already costs less than the margin: no solve
+                    self.counters.screened += 1
+                else:
+                    solves += 1
+                    if solves > s.max_claims or exclusion_margin(matrix, best, k, column_of[agent]) < s.claim_margin:
+                        agent = -1
+                    self.counters.solves += solves <= s.max_claims
+            final[row] = agent
+        # an agent that moves to another track says so once; "no track" only for one left without any
+        taken = set(final.values())
+        out = [self._identity(track.agent, camera, 0, 0.0, now_ns) for row, track in enumerate(tracks)
+               if track.agent >= 0 and final[row] != track.agent and track.agent not in taken]
+        for row, (key, track) in enumerate(zip(keys, tracks)):
+            agent = final[row]
+            if agent == track.agent:
+                continue
+            track.agent = agent
+            track.held_since_ns = now_ns
+            self.lost.pop(agent, None)
+            self._unshare(agent)
+            self.counters.identity_changes += 1
+            if agent >= 0:
+                out.append(self._identity(agent, camera, key[1], self._margin(evidence, row, agent), now_ns))
+        return out
+
+    def _margin(self, evidence: np.ndarray, row: int, agent: int) -> float:
+        others = np.concatenate([np.delete(evidence[:, agent], row), np.delete(evidence[row], agent),
+                                 [2 * self.settings.nobody_cost]])
+        return float(max(others.min() - evidence[row, agent], 0.0))
+
+    def _fixes(self, camera: str, tracks: list[_Track], evidence: np.ndarray, now_ns: int,
+               camera_sd_m: float, scored_ns: int) -> list[Any]:
+        """A fix is the track's position at the end of the bins its evidence has scored (`scored_ns`), not its
+        newest: a tracker's swap in the last delay_s would otherwise send a fix from someone else."""
+        s = self.settings
+        out = []
+        for row, track in enumerate(tracks):
+            i = track.agent
+            if i < 0:
+                continue
+            self.seen_xy[i], self.seen_ns[i] = track.cues.latest_xy, track.cues.last_ns
+            if evidence[row, i] > s.fix_cost or now_ns - track.held_since_ns < s.fix_after_s * 1e9:
+                continue
+            at = track.cues.at(scored_ns)
+            if at is None or at[0] - track.last_fix_ns < s.fix_every_s * 1e9:
+                continue
+            fix_ns, xy = at
+            track.last_fix_ns = fix_ns
+            variance = max(camera_sd_m, 0.05) ** 2
+            out.append(messages.new("PositionFix", timestamp_ns=int(fix_ns), agent_id=self.agents[i].agent_id,
+                                    kind=CorrectionKind.VIDEO, x_m=float(xy[0]), y_m=float(xy[1]),
+                                    covariance=[variance, 0.0, 0.0, variance], source_id=f"{camera}:{track.cues.track_id}"))
+            self.counters.fixes += 1
+        return out
+
+    def _learn_speed(self, tracks: list[_Track], evidence: np.ndarray, first: int, count: int) -> None:
+        """Refit the activity-to-speed line on pedestrians whose identity is clear (never on a doubtful pair)."""
+        for row, track in enumerate(tracks):
+            i = track.agent
+            if i < 0 or self.kinds[i] is not AgentKind.PEDESTRIAN:
+                continue
+            if evidence[row, i] > self.settings.fix_cost:
+                continue
+            self.speed_model.learn(self.agents[i].ring.window("activity", first, count), track.cues.speed(first, count))
+
+    def _search_lag(self, camera: str, tracks: list[_Track], end: int) -> None:
+        """Shift the camera's bins against the agents' to where the identified pairs' turn rates agree best,
+        within max_lag_s of the configured lag_prior_s (an absolute bound: successive moves never add up
+        beyond it)."""
+        s = self.settings
+        # chairs only: pedestrians' turn rates do not separate pairs (docs/identity.md, the room)
+        pairs = [(t, t.agent) for t in tracks if t.agent >= 0 and not self.is_pedestrian[t.agent]]
+        if not pairs:
+            return
+        span = int(4.0 / BIN_S)
+        prior = int(round(s.lag_prior_s / BIN_S))
+        max_lag = int(round(s.max_lag_s / BIN_S))
+        current = self.lag_bins.get(camera, prior)
+        lags = np.arange(prior - max_lag, prior + max_lag + 1) - current  # moves that stay within the bound
+        reach = int(np.abs(lags).max())
+        scores = np.zeros(len(lags))
+        counts = np.zeros(len(lags))
+        # an agent's bins end - span - TRACK_DELAY_BINS - lag ...: one read covers every lag and the turn
+        lo = end - span - TRACK_DELAY_BINS - reach - TURN_BINS
+        width = span + 2 * reach + TURN_BINS
+        take = (reach - lags)[:, None] + np.arange(span)[None, :] + TURN_BINS  # (lags, span) into the read
+        for track, i in pairs:
+            t_yaw = track.cues.turn_rate(end - span, span)
+            ring = self.agents[i].ring
+            name = "heading_dr" if np.isfinite(ring.window("heading_dr", end - span, span)).any() else "heading"
+            heading = ring.window(name, lo, width)
+            a_yaw = (heading[take] - heading[take - TURN_BINS]) / (TURN_BINS * BIN_S)  # as turn_rate, per lag
+            d = (t_yaw[None, :] - a_yaw) / s.yaw_sd_dps
+            ok = np.isfinite(d)
+            scores += np.where(ok, np.minimum(d * d, s.clip), 0.0).sum(axis=1)
+            counts += ok.sum(axis=1)
+        if counts.min() < 20:
+            return
+        mean = scores / counts
+        k = int(np.argmin(mean))
+        stay = int(np.flatnonzero(lags == 0)[0])
+        if mean[k] < mean[stay] - 0.2:  # move only when clearly better than no change
+            self.lag_bins[camera] = current + int(lags[k])
+            self.counters.lag_bins = self.lag_bins[camera]
+
+    def _drop(self, key: tuple[str, int], now_ns: int) -> list[Any]:
+        """Forget a track the camera lost; its agent, if any, now has no track."""
+        track = self.tracks.pop(key)
+        if track.agent >= 0:
+            self.lost[track.agent] = _Lost.of(key[0], track)
+        out = [self._identity(i, key[0], 0, 0.0, now_ns) for i in track.sharers]
+        if track.agent >= 0:
+            out.append(self._identity(track.agent, key[0], 0, 0.0, now_ns))
+        return out
+
+    def _identity(self, agent: int, camera: str, track_id: int, score: float, now_ns: int) -> Any:
+        return messages.new("TrackIdentity", timestamp_ns=int(now_ns), agent_id=self.agents[agent].agent_id,
+                            camera_id=camera, track_id=int(track_id), method=METHOD, score=float(score))
+
+    def assignment(self) -> dict[str, tuple[str, int]]:
+        """agent id -> (camera, track id) for every agent that has a track now."""
+        return {self.agents[t.agent].agent_id: key for key, t in self.tracks.items() if t.agent >= 0}

@@ -1,0 +1,76 @@
+"""The hub's whole job at a venue: the chairs' corrections, the pedestrians' map matching
+(hub/pedestrian/hub.py) and who is which camera track.
+
+`hub.chair.hub.ChairHub` corrects the wheelchairs (beacons, collisions, fixes); once a camera's
+first frame arrives, `hub.identity.engine.IdentityEngine` names its tracks from every agent's motion and
+its identified positions go to ChairHub as video fixes, like an operator's. Same interface as
+ChairHub: `on_message(message, arrival_ns) -> outputs`, `flush()`, `key_for(output)`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from hub.chair.hub import STALE_MPS, ChairHub, HubSettings
+from hub.identity.engine import IdentityEngine, IdentitySettings
+from hub.pedestrian.hub import PedestrianHub
+from protocol import keys, messages
+from protocol.session import Session
+
+
+class VenueHub:
+    def __init__(self, session: Session, settings: HubSettings = HubSettings(),
+                 identity_settings: IdentitySettings = IdentitySettings()):
+        self.session = session
+        self.chairs = ChairHub(session, settings)
+        self.pedestrians = PedestrianHub(session)
+        self.identity_settings = identity_settings
+        self.identity: IdentityEngine | None = None
+
+    @property
+    def agents(self) -> dict:
+        return self.chairs.agents
+
+    @property
+    def counters(self) -> Any:
+        return self.chairs.counters
+
+    def on_message(self, message: Any, arrival_ns: int) -> list[Any]:
+        name = messages.type_name(message)
+        if name == "CameraFrame" and self.identity is None and "camera" in self.chairs.settings.corrections:
+            self.identity = IdentityEngine(self.session, self.identity_settings, pose_of=self._pose_of)
+        out: list[Any] = []
+        if self.identity is not None:
+            for produced in self.identity.on_message(message):
+                if messages.type_name(produced) == "PositionFix":
+                    out += self.chairs.on_message(produced, arrival_ns)  # [] for an agent that is not a chair
+                else:
+                    out.append(produced)
+        if name != "CameraFrame":
+            out += self.chairs.on_message(message, arrival_ns)
+            out += self.pedestrians.on_message(message)
+        return out
+
+    def flush(self) -> list[Any]:
+        return self.chairs.flush() + self.pedestrians.flush()
+
+    def key_for(self, message: Any) -> str:
+        if messages.type_name(message) == "TrackIdentity":
+            return keys.identity(self.session.venue.name, message.agent_id)
+        if message.agent_id in self.pedestrians.agents:
+            return self.pedestrians.key_for(message)
+        return self.chairs.key_for(message)
+
+    def _pose_of(self, agent_id: str, time_ns: int) -> tuple[np.ndarray, float] | None:
+        """A chair's live position at `time_ns` and its sd: the edge's covariance, what it is missing
+        (hub/chair/hub.py), and how far the chair may have gone since that pose if its poses have not
+        reached `time_ns` yet (a device's link stalls, a burst)."""
+        view = self.chairs.agents.get(agent_id)
+        pose = view.pose_at(time_ns) if view is not None else None
+        if pose is None:
+            return None
+        honest = pose[1] + view.extra
+        stale_m = STALE_MPS * max(time_ns - view.latest_ns, 0) * 1e-9 if view.latest_ns is not None else 0.0
+        return pose[0], float(np.hypot(np.sqrt(max(np.linalg.eigvalsh(honest).max(), 0.0)), stale_m))

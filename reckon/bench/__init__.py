@@ -1,0 +1,1 @@
+"""`reckon bench`: pipeline speed and latency, hub load, soak (docs/benchmarks.md)."""

@@ -1,0 +1,5 @@
+import sys
+
+from reckon.cli import main
+
+sys.exit(main())

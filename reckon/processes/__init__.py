@@ -1,0 +1,1 @@
+"""The long-running processes: `reckon edge`, `reckon hub` and the hub's checkpoint."""

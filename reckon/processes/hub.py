@@ -1,0 +1,241 @@
+"""`reckon hub`: the venue's hub over Zenoh. Every agent's streams in; corrected poses and corrections out.
+
+One subscription to the agents' input streams (`reckon.transport.bus.PolledSubscription`: taken in batches on
+the hub's thread; a slow hub's full FIFOs slow the edges down, it never loses a measurement) feeds `hub.venue.VenueHub` (chairs' corrections, pedestrians' map matching, camera identities) on one
+thread, in arrival order. Its
+outputs go out at once: live poses on `reckon/<venue>/<agent>/pose/live`, refined ones on
+`.../pose/refined`, corrections to the edges on `.../correction`. A swimmer's lengths
+(`.../length`, from its edge) are recorded, logged as they come and totalled in the summary. With `output`, every input and
+every output is written to a session log (MCAP) as it passes, with the hub's clock as log time.
+
+The hub needs no edge to be up first and no edge needs the hub: an edge started earlier is picked
+up with its next pose, one that goes quiet stops holding the collision pairing back after
+`stale_s`, and one that comes back carries on (its pose says which corrections it holds).
+
+Repeats (an edge's spool replays what the hub may have had) are dropped before anything else
+(hub/dedup.py). With `state`, the hub checkpoints itself every `snapshot_every_s`, and a hub
+started with an existing state file restores it, re-applies the inputs its recording holds after
+the checkpoint, records to the next free name (hub.1.mcap) and goes on (reckon/processes/checkpoint.py,
+docs/faults.md).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import zenoh
+
+from reckon.processes import checkpoint as hub_state
+from hub.chair.hub import HubSettings
+from hub.dedup import Deduplicator, Verdict
+from hub.venue import VenueHub
+from protocol import bus as wire
+from protocol import keys
+from protocol.errors import ConfigError, InputError
+from protocol.session import Session
+from protocol.session_log import LogMessages, SessionWriter
+from reckon.transport.bus import Alive, PolledSubscription, Publisher, open_session
+
+log = logging.getLogger(__name__)
+POLL_S = 0.1
+BATCH = 256  # samples taken from the FIFOs at a time
+FIFO_CAPACITY = 1024  # per input selector: what the hub holds before Zenoh pushes back on the edges
+INPUTS = ("imu/*", "beacon/*", "pose/edge", "event/impact", "event/scan", "fix", "length", "tracks/*")  # tracks: camera frames
+WARN_EVERY_S = 10.0
+SNAPSHOT_EVERY_S = 2.0  # a restarted hub re-applies at most this much of its recording
+FLUSH_EVERY_S = 0.5  # with a state file, the recording reaches the disk this often: a kill loses at most this much of it
+
+
+@dataclass
+class HubSummary:
+    venue: str
+    inputs: int = 0
+    outputs: int = 0
+    corrections: dict[str, dict[str, int]] = field(default_factory=dict)  # agent -> kind -> count
+    pairs: int = 0
+    skipped: int = 0
+    full_waits: int = 0
+    duplicates: int = 0  # inputs dropped as exact repeats (hub/dedup.py)
+    stale: int = 0  # inputs dropped as older than their stream's newest
+    reapplied: int = 0  # inputs re-applied from the recording after a restart
+    swims: dict[str, SwimTotals] = field(default_factory=dict)  # sensor -> its lengths so far
+    walkers: dict[str, str] = field(default_factory=dict)  # pedestrian -> its map-matched poses and the last one
+
+    def __str__(self) -> str:
+        total = sum(sum(kinds.values()) for kinds in self.corrections.values())
+        text = (f"hub {self.venue}: {self.inputs} messages in, {self.outputs} out, {total} corrections "
+                f"({self.pairs} collision pairs), {self.skipped} samples skipped, queue full {self.full_waits} times, "
+                f"{self.duplicates} duplicates and {self.stale} stale inputs dropped")
+        if self.reapplied:
+            text += f", {self.reapplied} inputs re-applied after a restart"
+        for sensor_id, swim in sorted(self.swims.items()):
+            text += f"\n  {sensor_id}: {swim}"
+        for agent_id, line in sorted(self.walkers.items()):
+            text += f"\n  {agent_id}: {line}"
+        return text
+
+
+@dataclass
+class SwimTotals:
+    """A swimmer's sensor as the hub shows it: lengths, total swum distance, the latest length."""
+
+    lengths: int = 0
+    swum_m: float = 0.0
+    seconds: float = 0.0
+    latest: str = ""
+
+    def add(self, length: Any) -> str:
+        self.lengths += 1
+        self.swum_m += length.swum_distance_m
+        self.seconds += length.duration_s
+        deviation = max((abs(v) for v in length.lateral_deviation_m), default=0.0)
+        self.latest = (f"length {length.index}: {length.swum_distance_m:.2f} m swum ({length.lane_distance_m:.2f} m "
+                       f"along the lane) in {length.duration_s:.1f} s, {length.stroke_count} strokes "
+                       f"({length.stroke_rate_per_min:.0f}/min), snaking up to {deviation:.2f} m")
+        return self.latest
+
+    def __str__(self) -> str:
+        return f"{self.lengths} lengths, {self.swum_m:.1f} m in {self.seconds:.0f} s; last {self.latest or 'none'}"
+
+
+def run_hub(config: zenoh.Config, session: Session, stop: threading.Event, settings: HubSettings = HubSettings(),
+            output: Path | None = None, ready: threading.Event | None = None,
+            on_output: Callable[[Any], None] | None = None, on_input: Callable[[Any], None] | None = None,
+            on_bus: Callable[[zenoh.Session], Any] | None = None, state: Path | None = None,
+            snapshot_every_s: float = SNAPSHOT_EVERY_S) -> HubSummary:
+    """Run until `stop`; then take what was already received, flush the refined track, return.
+
+    on_input / on_output: called with every decoded input / output message on the hub's thread (the
+    court view's hand-over: they must not block). on_bus: called with the hub's Zenoh session once
+    open; the context manager it returns is entered and closed with the hub (the view's own
+    subscriptions). state: the checkpoint file (needs `output`); restored from when it exists.
+    """
+    if state is not None and output is None:
+        raise ConfigError(f"hub state {state}: needs a recording (-o FILE.mcap) to re-apply inputs from")
+    hub, dedup = VenueHub(session, settings), Deduplicator()
+    venue = session.venue.name
+    summary = HubSummary(venue)
+    skipped_since, last_warning = 0, 0.0
+    restored = hub_state.read(state) if state is not None else None
+    if restored is not None:
+        output = hub_state.next_recording(output)  # the recording restored from stays as it is
+    recorded, unsent, next_snapshot = 0, [], time.monotonic() + snapshot_every_s
+    next_flush = time.monotonic() + FLUSH_EVERY_S
+    with ExitStack() as stack:
+        writer = stack.enter_context(SessionWriter(output, session)) if output else None
+        if restored is not None:
+            hub, dedup, recorded, unsent = _catch_up(restored, state, writer, summary)
+        bus = stack.enter_context(open_session(config))
+        publisher = stack.enter_context(Publisher(bus))
+        # Inputs only: were the hub subscribed to its own outputs, a full queue would block its
+        # own publishing, which only it can drain.
+        # Taken in batches on this thread (no drain threads: see PolledSubscription), each batch in the
+        # order its samples were published, whatever their streams: as they arrived, not stream by stream.
+        subscription = stack.enter_context(PolledSubscription(bus, [keys.all_agents(venue, stream) for stream in INPUTS],
+                                                              fifo_capacity=FIFO_CAPACITY, by_source_time=True))
+        stack.enter_context(Alive(bus, venue, wire.Role.HUB))
+        if on_bus:
+            stack.enter_context(on_bus(bus))
+        if ready is not None:
+            ready.set()
+
+        def emit(outputs: list[Any]) -> None:
+            now = time.time_ns()
+            for out in outputs:
+                key = hub.key_for(out)
+                publisher.publish(key, out)
+                if writer:
+                    writer.write(key, out, now)
+                if on_output:
+                    on_output(out)
+            summary.outputs += len(outputs)
+
+        emit(unsent)  # made again from the recording, never sent by the hub before (edges drop repeats)
+        stopping = False
+        while True:
+            if stop.is_set() and not stopping:
+                stopping = True
+                subscription.undeclare()  # what was received before still comes out of `take`
+            try:
+                batch = subscription.take(BATCH, timeout=POLL_S)
+            except queue.Empty:
+                continue
+            if batch is None:
+                break
+            for item in batch:
+                if item.delete:
+                    continue
+                try:
+                    message = item.decode()
+                    if dedup.check(item.key, message) is not Verdict.NEW:
+                        continue
+                    if writer:
+                        writer.write(item.key, message, item.received_ns)
+                        recorded += 1
+                    if on_input:
+                        on_input(message)
+                    summary.inputs += 1
+                    if message.DESCRIPTOR.name == "SwimLength":
+                        line = summary.swims.setdefault(message.sensor_id, SwimTotals()).add(message)
+                        log.info("%s %s", message.sensor_id, line)
+                        if on_output:
+                            on_output(message)
+                        continue
+                    emit(hub.on_message(message, item.received_ns))
+                except (InputError, ValueError) as error:
+                    summary.skipped += 1
+                    skipped_since += 1
+                    if time.monotonic() - last_warning >= WARN_EVERY_S:
+                        log.warning("skipped %d samples; latest on %s: %s", skipped_since, item.key, error)
+                        skipped_since, last_warning = 0, time.monotonic()
+                if state is not None and time.monotonic() >= next_snapshot:
+                    _checkpoint(state, writer, output, hub_state.HubState(hub, dedup, output.name, recorded))
+                    next_snapshot, next_flush = time.monotonic() + snapshot_every_s, time.monotonic() + FLUSH_EVERY_S
+                elif state is not None and time.monotonic() >= next_flush:
+                    writer.flush()
+                    next_flush = time.monotonic() + FLUSH_EVERY_S
+        if state is not None:  # before the final flush: a hub restarted from it carries on the session
+            _checkpoint(state, writer, output, hub_state.HubState(hub, dedup, output.name, recorded))
+        for part in hub.chairs.flush_by_agent():  # one agent's refined track at a time, not the venue's at once
+            emit(part)
+        emit(hub.flush())  # the rest (pedestrians); the chairs' smoothers are empty now
+        summary.full_waits = subscription.stats.full_waits
+    summary.corrections = {view.agent_id: dict(view.applied) for view in hub.agents.values()}
+    summary.pairs = hub.counters.pairs
+    summary.duplicates, summary.stale = dedup.counters.duplicates, dedup.counters.stale
+    summary.walkers = {view.agent_id: view.describe() for view in hub.pedestrians.agents.values() if view.poses}
+    return summary
+
+
+def _checkpoint(path: Path, writer: SessionWriter, output: Path, state: hub_state.HubState) -> None:
+    """Flush the recording (the snapshot's inputs must be on disk), then replace the snapshot."""
+    if output.parent.resolve() != path.parent.resolve():
+        state.recording = str(output.resolve())
+    writer.flush()
+    hub_state.write_atomic(path, hub_state.dumps(state))
+
+
+def _catch_up(restored: hub_state.HubState, path: Path, writer: SessionWriter,
+              summary: HubSummary) -> tuple[VenueHub, Deduplicator, int, list[Any]]:
+    """Re-apply the old recording after the snapshot into `restored`, recording those inputs again."""
+    started = time.monotonic()
+    old = path.parent / restored.recording  # an absolute name stays absolute
+    log_messages = LogMessages(old)
+    if not old.exists():  # the snapshot alone still holds the session up to it
+        log.warning("restoring the hub: its recording %s is gone; carrying on from the snapshot alone", old)
+    result = hub_state.catch_up(restored, log_messages if old.exists() else [],
+                                lambda log_time, topic, message: writer.write(topic, message, log_time))
+    for problem in log_messages.problems + result.problems:
+        log.warning("restoring the hub: %s", problem)
+    summary.reapplied = result.reapplied
+    log.warning("hub restored from %s and %s: %d inputs re-applied (%d repeats dropped) in %.3f s; %d corrections "
+                "to send again", path, old, result.reapplied, result.repeats, time.monotonic() - started,
+                len(result.unsent))
+    return restored.hub, restored.dedup, result.reapplied, result.unsent

@@ -1,0 +1,1 @@
+"""Operators' and developers' tools: doctor, fuzz, QR codes, Foxglove export, the demo."""

@@ -1,0 +1,1 @@
+"""The hub's live court view in the browser: its state, its server and the page in `static/`."""

@@ -1,0 +1,1 @@
+"""Simulated devices: x-IMU3 and TSND121/151 bytes, on real pseudo-terminals."""

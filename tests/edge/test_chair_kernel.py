@@ -1,0 +1,217 @@
+"""The compiled batch path (edge/chair/kernel.py) against the readable reference, chair_estimator.step.
+
+Correctness only: how fast the kernel runs is `reckon bench`'s business, never a test's.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from edge.chair.estimator import ChairSample, ChairSettings, ChairState, Flag, start, step
+from edge.chair.kernel import (FLAGS, SAMPLE_WIDTH, STATE_SIZE, V_ACCEL, V_HAS_MAG, V_LEFT, V_MAG, V_RIGHT, V_YAW_RATE,
+                               pack_samples, pack_settings, pack_state, run_batch, step_batch, unpack_state)
+from protocol.session_log import read_session
+from reckon.evaluation.inputs import build_inputs
+from reckon.evaluation.reckon_run import merged_samples
+from sim_devices.wheelchair import simulate
+
+# a magnetometer aid that trusts its fit early and gates hard: rejections and re-learning north
+STRICT_MAG = dict(mag_fit_min_points=10, mag_fit_min_spread=0.3, mag_gate_chi2=0.05, mag_recover_rejections=3)
+
+
+@pytest.fixture(scope="module")
+def game(tmp_path_factory):
+    """Per chair of a 2-player 30 s simulated game: (settings, start state, merged samples after the first)."""
+    path = tmp_path_factory.mktemp("kernel") / "game.mcap"
+    simulate(players=2, duration_s=30.0, seed=7, output=path)
+    chairs = []
+    for agent in build_inputs(read_session(path)).agents:
+        samples = merged_samples(agent)
+        chair = ChairSettings(wheel_diameter_m=agent.agent.wheel_diameter_m, camber_deg=agent.agent.camber_deg)
+        first = start(chair, samples[0], agent.agent.start_x_m, agent.agent.start_y_m, agent.agent.start_heading_rad)
+        chairs.append((chair, first, samples[1:]))
+    return chairs
+
+
+def with_mishaps(samples: list[ChairSample]) -> list[ChairSample]:
+    """The game's samples plus what the live path also meets: lost seat packets, time going back,
+    a hard impact, a stretch without magnetometer."""
+    out = list(samples[:1500])
+    # 40 seat samples (0.2 s) lost: the wheels' rotation meanwhile arrives with the next one
+    lost = samples[1500:1540]
+    after = samples[1540]
+    out.append(replace(after, left_rotation_deg=after.left_rotation_deg + sum(s.left_rotation_deg for s in lost),
+                       right_rotation_deg=after.right_rotation_deg + sum(s.right_rotation_deg for s in lost)))
+    out += samples[1541:2500]
+    out.append(samples[2490])  # a stale sample from the past
+    out.append(replace(samples[2499], yaw_rate_dps=55.0))  # the same timestamp again
+    out += samples[2500:3500]
+    for s in samples[3500:3504]:  # a 6 g contact spanning four samples: one shove
+        out.append(replace(s, accel_g=(6.0, 2.0, 1.0)))
+    out += samples[3504:4000]
+    out += [replace(s, mag_gauss=None) for s in samples[4000:4800]]
+    out += samples[4800:]
+    return out
+
+
+def reference(chair: ChairSettings, state: ChairState,
+              samples: list[ChairSample]) -> tuple[ChairState, np.ndarray, int]:
+    """`step` in turn: (final state, each sample's flags, how often north was re-learned)."""
+    flags, relearned = [], 0
+    for sample in samples:
+        before = state.mag.rejections
+        state = step(chair, state, sample)
+        flags.append(int(state.flags))
+        relearned += (before >= chair.mag_recover_rejections and state.mag.rejections == 0
+                      and not state.flags & Flag.MAG_USED)
+    return state, np.array(flags), relearned
+
+
+def assert_same_state(kernel: ChairState, expected: ChairState) -> None:
+    """Equal to 1e-9 relative (bit for bit where numpy's BLAS sums as the kernel does, see its
+    docstring); covariances relative to each entry's scale sqrt(P_ii P_jj), as an entry near zero
+    has no relative precision of its own."""
+    assert kernel.time_ns == expected.time_ns
+    assert kernel.flags == expected.flags
+    assert kernel.in_impact == expected.in_impact
+    assert (kernel.mag.ready, kernel.mag.rejections) == (expected.mag.ready, expected.mag.rejections)
+    close = dict(rtol=1e-9, atol=1e-300)
+    np.testing.assert_allclose(kernel.mean, expected.mean, **close)
+    scale = np.sqrt(np.outer(np.diag(expected.cov), np.diag(expected.cov)))
+    assert np.all(np.abs(kernel.cov - expected.cov) <= 1e-9 * scale)
+    scalars = ("yaw_rate_dps", "left_bias_dps", "right_bias_dps", "still_s", "accel_mean_g", "travel_m", "turn_xy",
+               "turn_xx")
+    for name in scalars:
+        np.testing.assert_allclose(getattr(kernel, name), getattr(expected, name), err_msg=name, **close)
+    np.testing.assert_allclose(kernel.gravity, expected.gravity, **close)
+    np.testing.assert_allclose(kernel.mag.fit, expected.mag.fit, **close)
+    np.testing.assert_allclose(kernel.mag.due_s, expected.mag.due_s, **close)
+    np.testing.assert_allclose(kernel.mag.innovation_deg, expected.mag.innovation_deg, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("overrides", [{}, STRICT_MAG], ids=["default", "strict-mag"])
+def test_kernel_steps_as_the_reference_does(game, overrides):
+    seen, relearned_north = Flag.NONE, 0
+    for chair, first, samples in game:
+        chair = replace(chair, **overrides)
+        samples = with_mishaps(samples)
+        expected, expected_flags, relearned = reference(chair, first, samples)
+        state, flags = step_batch(chair, first, samples)
+        np.testing.assert_array_equal(flags, expected_flags)
+        assert_same_state(state, expected)
+        # and part way, where the magnetometer has been absent for a while
+        middle, _ = step_batch(chair, first, samples[:4500])
+        assert_same_state(middle, reference(chair, first, samples[:4500])[0])
+
+        # the mishaps and the filter's branches did happen
+        seen |= Flag(int(np.bitwise_or.reduce(expected_flags)))
+        relearned_north += relearned
+    assert seen & Flag.STILL and seen & Flag.GAP and seen & Flag.BACKWARDS and seen & Flag.IMPACT
+    assert seen & Flag.MAG_USED
+    if overrides:
+        assert seen & Flag.MAG_REJECTED and relearned_north > 0
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.integers(0, 6000), max_size=6))
+def test_any_split_into_batches_gives_the_same_result(game, cuts):
+    chair, first, samples = game[1]
+    times, values = pack_samples(with_mishaps(samples))
+    settings_vector = pack_settings(chair)
+    whole, whole_flags = run_batch(settings_vector, pack_state(first), times, values)
+    state, flags = pack_state(first), []
+    bounds = [0, *sorted(min(c, len(times)) for c in cuts), len(times)]
+    for lo, hi in zip(bounds, bounds[1:]):
+        state, part = run_batch(settings_vector, state, times[lo:hi], values[lo:hi])
+        flags.append(part)
+    np.testing.assert_array_equal(state, whole)
+    np.testing.assert_array_equal(np.concatenate(flags), whole_flags)
+
+
+def test_packing_keeps_every_field(game):
+    chair, first, samples = game[0]
+    state = reference(chair, first, samples)[0]
+    assert state.mag.ready and state.mag.fit.any()  # a state with everything in use
+    for original in (state, replace(state, time_ns=-(2**62) + 12345, flags=Flag.GAP | Flag.IMPACT, in_impact=True)):
+        vector = pack_state(original)
+        assert vector.shape == (STATE_SIZE,) and vector.dtype == np.float64
+        back = unpack_state(vector)
+        assert back.time_ns == original.time_ns and isinstance(back.time_ns, int)
+        assert back.flags == original.flags and back.in_impact == original.in_impact
+        assert back.gravity == original.gravity
+        np.testing.assert_array_equal(back.mean, original.mean)
+        np.testing.assert_array_equal(back.cov, original.cov)
+        np.testing.assert_array_equal(back.mag.fit, original.mag.fit)
+        assert (back.mag.due_s, back.mag.ready, back.mag.rejections, back.mag.innovation_deg) == (
+            original.mag.due_s, original.mag.ready, original.mag.rejections, original.mag.innovation_deg)
+        for name in ("yaw_rate_dps", "left_bias_dps", "right_bias_dps", "still_s", "accel_mean_g", "travel_m",
+                     "turn_xy", "turn_xx"):
+            assert getattr(back, name) == getattr(original, name)
+
+
+def test_samples_without_magnetometer_pack_as_absent():
+    times, values = pack_samples([ChairSample(5, 1.0, 2.0, 3.0, (0.0, 0.1, 1.0), None),
+                                  ChairSample(10, 1.5, 2.5, 3.5, (0.0, 0.0, 1.0), (0.2, 0.1, -0.3))])
+    assert times.dtype == np.int64 and values.shape == (2, SAMPLE_WIDTH)
+    assert values[0, V_HAS_MAG] == 0.0 and values[1, V_HAS_MAG] == 1.0
+    assert values[1, V_MAG:V_MAG + 3].tolist() == [0.2, 0.1, -0.3]
+    assert values[0, [V_YAW_RATE, V_LEFT, V_RIGHT]].tolist() == [1.0, 2.0, 3.0]
+    assert values[0, V_ACCEL:V_ACCEL + 3].tolist() == [0.0, 0.1, 1.0]
+    assert pack_samples([])[1].shape == (0, SAMPLE_WIDTH)
+
+
+def test_an_empty_batch_or_a_backwards_one_changes_nothing_but_the_flag(game):
+    chair, first, samples = game[0]
+    vector = pack_state(first)
+    settings_vector = pack_settings(chair)
+    same, flags = run_batch(settings_vector, vector, np.zeros(0, np.int64), np.zeros((0, SAMPLE_WIDTH)))
+    np.testing.assert_array_equal(same, vector)
+    assert flags.shape == (0,)
+    times, values = pack_samples([samples[0]])
+    stale = times - 10 ** 9
+    after, flags = run_batch(settings_vector, vector, stale, values)
+    assert flags.tolist() == [Flag.BACKWARDS]
+    assert unpack_state(after).flags == Flag.BACKWARDS
+    np.testing.assert_array_equal(np.delete(after, FLAGS), np.delete(vector, FLAGS))
+    np.testing.assert_array_equal(vector, pack_state(first))  # the input was not written to
+
+
+def test_state_size_is_fixed_over_a_million_steps():
+    """10^6 synthetic samples (83 min at 200 Hz) with gaps, impacts, a backwards timestamp and a
+    magnetometer that comes and goes: the state is the same fixed-size vector, all finite."""
+    n = 1_000_000
+    rng = np.random.default_rng(1)
+    i = np.arange(n)
+    times = 1_704_067_200_000_000_000 + i * 5_000_000
+    times[i % 50_000 == 49_999] += 300_000_000  # a lost stretch every 250 s
+    times[123_456] = times[123_455]
+    values = np.zeros((n, SAMPLE_WIDTH))
+    moving = np.sin(i / 20_000.0) > -0.3  # rolling and pivoting, then still spells of ~30 s
+    pivot = np.sin(i / 400.0) * moving
+    values[:, V_YAW_RATE] = 90.0 * pivot
+    values[:, V_LEFT] = 1.2 * moving - 0.4 * pivot
+    values[:, V_RIGHT] = 1.2 * moving + 0.4 * pivot
+    values[:, V_ACCEL:V_ACCEL + 3] = (0.0, 0.0, 1.0) + rng.normal(0.0, 0.002, (n, 3))
+    values[i % 7_919 == 0, V_ACCEL] = 7.0
+    heading = np.cumsum(values[:, V_YAW_RATE]) * 0.005 * math.pi / 180.0
+    disturbance = 1.5 * ((i // 40_000) % 5 == 4)  # a steel structure turns the field for 200 s
+    values[:, V_MAG] = 0.3 * np.cos(0.7 + disturbance - heading) + 0.05
+    values[:, V_MAG + 1] = 0.3 * np.sin(0.7 + disturbance - heading) - 0.02
+    values[:, V_MAG + 2] = -0.35
+    values[:, V_HAS_MAG] = (i // 30_000) % 3 != 2
+    values[values[:, V_HAS_MAG] == 0.0, V_MAG:V_MAG + 3] = np.nan
+    chair = ChairSettings()
+    first = start(chair, ChairSample(int(times[0]) - 5_000_000, 0.0, 0.0, 0.0, (0.0, 0.0, 1.0)), 0.0, 0.0, 0.0)
+    vector, flags = run_batch(pack_settings(chair), pack_state(first), times, values)
+    assert vector.shape == (STATE_SIZE,) and flags.shape == (n,)
+    assert np.all(np.isfinite(vector))
+    assert len(pack_state(unpack_state(vector))) == STATE_SIZE
+    assert unpack_state(vector).time_ns == int(times[-1])
+    seen = Flag(int(np.bitwise_or.reduce(flags)))
+    assert seen == Flag.STILL | Flag.GAP | Flag.BACKWARDS | Flag.IMPACT | Flag.MAG_USED | Flag.MAG_REJECTED

@@ -1,0 +1,230 @@
+"""The hub's computation without a bus: pairing, beacon passes, fixes, expected shifts, smoothing, clocks."""
+
+import numpy as np
+import pytest
+
+from hub.chair.hub import ChairHub, HubSettings
+from hub.clocks import ClockOffsets
+from hub.chair.smoother import FixedLagSmoother
+from protocol import messages
+from protocol.session import session_from_dict
+
+S = 1_000_000_000
+Kind = messages.CorrectionKind
+
+
+def venue(n_agents: int):
+    return session_from_dict({
+        "venue": {"name": "court", "court_length_m": 28.0, "court_width_m": 15.0,
+                  "beacons": [{"id": "goal-a", "x_m": 1.2, "y_m": 7.5, "tx_power_dbm": -59.0}]},
+        "agents": [{"id": f"c{i}", "wheel_diameter_m": 0.61, "start_x_m": 0.0, "start_y_m": 0.0,
+                    "sensors": [{"id": f"c{i}-seat", "mount": "seat"}, {"id": f"c{i}-l", "mount": "left_wheel", "spin_axis": "+z"},
+                                {"id": f"c{i}-r", "mount": "right_wheel", "spin_axis": "-z"}]} for i in range(n_agents)],
+    }, where="test")
+
+
+def pose(agent: str, t: int, x: float, y: float, sd: float = 0.5, sequence: int = 0):
+    cov = np.diag([sd * sd, sd * sd, 0.01]).ravel().tolist()
+    return messages.new("EstimatedPose", timestamp_ns=t, agent_id=agent, x_m=x, y_m=y, heading_rad=0.0,
+                        covariance=cov, method="reckon", track=messages.Track.LIVE, correction_sequence=sequence)
+
+
+def impact(agent: str, t: int, peak: float = 9.0):
+    return messages.new("ImpactEvent", timestamp_ns=t, agent_id=agent, sensor_id=f"{agent}-seat", peak_g=peak)
+
+
+def send(hub, message):
+    """Into the hub, arriving at its own timestamp (a link with no delay)."""
+    return hub.on_message(message, message.timestamp_ns)
+
+
+def corrections(outputs):
+    return [o for o in outputs if messages.type_name(o) == "Correction"]
+
+
+def feed_poses(hub, positions: dict, start_s: float, end_s: float, rate_hz: float = 50.0):
+    out = []
+    for t in np.arange(start_s, end_s, 1.0 / rate_hz):
+        for agent, (x, y) in positions.items():
+            out += send(hub, pose(agent, int(t * S), x, y))
+    return out
+
+
+def test_three_impacts_at_once_pair_the_two_in_contact_by_gating():
+    hub = ChairHub(venue(3), HubSettings(corrections=frozenset({"collision"})))
+    positions = {"c0": (10.0, 5.0), "c1": (11.2, 5.0), "c2": (20.0, 5.0)}  # c0-c1 1.2 m apart, c2 far
+    feed_poses(hub, positions, 0.0, 2.0)
+    for agent in positions:
+        send(hub, impact(agent, int(2.0 * S) + 1000))
+    out = corrections(feed_poses(hub, positions, 2.0, 4.0))
+    assert sorted(c.agent_id for c in out) == ["c0", "c1"]
+    assert hub.counters.pairs == 1 and hub.counters.groups == 1
+    by_agent = {c.agent_id: c for c in out}
+    # pulled together along the line: c0 (left) moves right, c1 moves left, by the 0.3 m excess shared
+    assert by_agent["c0"].dx_m > 0 > by_agent["c1"].dx_m
+    assert by_agent["c0"].other_agent_id == "c1" and by_agent["c0"].kind == Kind.COLLISION
+
+
+def test_four_impacts_at_once_give_two_pairs():
+    hub = ChairHub(venue(4), HubSettings(corrections=frozenset({"collision"})))
+    positions = {"c0": (5.0, 5.0), "c1": (5.9, 5.0), "c2": (20.0, 9.0), "c3": (20.0, 10.0)}
+    feed_poses(hub, positions, 0.0, 2.0)
+    for k, agent in enumerate(positions):
+        send(hub, impact(agent, int(2.0 * S) + k * 50_000_000))
+    feed_poses(hub, positions, 2.0, 4.0)
+    assert hub.counters.pairs == 2
+
+
+def test_a_lone_impact_and_a_far_pair_change_nothing():
+    hub = ChairHub(venue(2), HubSettings(corrections=frozenset({"collision"})))
+    positions = {"c0": (2.0, 2.0), "c1": (25.0, 12.0)}  # 24 m apart with 0.5 m uncertainty: no contact
+    feed_poses(hub, positions, 0.0, 2.0)
+    send(hub, impact("c0", int(2.0 * S)))
+    send(hub, impact("c1", int(2.1 * S)))
+    assert corrections(feed_poses(hub, positions, 2.0, 4.0)) == []
+    assert hub.counters.gated_out == 1 and hub.counters.pairs == 0
+
+
+def test_live_pose_carries_the_expected_shift_until_the_edge_acknowledges_it():
+    hub = ChairHub(venue(1), HubSettings(corrections=frozenset({"camera"})))
+    feed_poses(hub, {"c0": (10.0, 5.0)}, 0.0, 1.0)
+    fix = messages.new("PositionFix", timestamp_ns=int(0.9 * S), agent_id="c0", kind=Kind.VIDEO, x_m=11.0, y_m=5.0,
+                       covariance=[0.25, 0.0, 0.0, 0.25], source_id="camera-1")
+    (correction,) = corrections(send(hub, fix))
+    assert correction.sequence == 1 and correction.dx_m == pytest.approx(1.0)
+    # edge pose that does not yet hold the correction: the hub adds the shift it expects (gain 0.5)
+    live = send(hub, pose("c0", int(1.0 * S), 10.0, 5.0, sequence=0))[0]
+    assert live.x_m == pytest.approx(10.5)
+    assert live.correction_sequence == 1
+    # the edge applied it: its own pose now holds the shift; the hub must not add it twice
+    live = send(hub, pose("c0", int(1.02 * S), 10.5, 5.0, sequence=1))[0]
+    assert live.x_m == pytest.approx(10.5)
+
+
+def test_a_fix_with_a_bad_covariance_is_refused_with_the_value():
+    hub = ChairHub(venue(1))
+    feed_poses(hub, {"c0": (10.0, 5.0)}, 0.0, 0.5)
+    fix = messages.new("PositionFix", timestamp_ns=1, agent_id="c0", kind=Kind.MANUAL, x_m=1.0, y_m=1.0,
+                       covariance=[1.0, 0.0, 0.0, -1.0])
+    with pytest.raises(ValueError, match="positive-definite"):
+        send(hub, fix)
+
+
+def test_a_beacon_pass_gives_one_fix_when_it_ends():
+    hub = ChairHub(venue(1), HubSettings(corrections=frozenset({"beacon"})))
+    feed_poses(hub, {"c0": (3.0, 7.5)}, 0.0, 1.0)
+    for k, rssi in enumerate([-70.0, -62.0, -58.0, -63.0, -71.0]):
+        sighting = messages.new("BeaconSighting", timestamp_ns=int((1.0 + 0.2 * k) * S), agent_id="c0",
+                                sensor_id="c0-seat", beacon_id="goal-a", rssi_dbm=rssi)
+        assert send(hub, sighting) == []
+    assert corrections(feed_poses(hub, {"c0": (3.0, 7.5)}, 1.0, 3.0)) == []  # 1.5 s after the last: not yet
+    (fix,) = corrections(feed_poses(hub, {"c0": (3.0, 7.5)}, 3.0, 4.0))
+    assert fix.kind == Kind.BEACON and fix.source_id == "goal-a"
+    assert fix.dx_m == pytest.approx(1.2 - 3.0)  # towards the beacon, measured at the strongest sighting
+
+
+def test_refined_track_takes_a_share_of_a_later_correction():
+    hub = ChairHub(venue(1), HubSettings(lag_s=2.0, corrections=frozenset({"fix"})))
+    refined = []
+    for k in range(200):  # the edge's uncertainty grows as it drives
+        sd = 0.1 + 0.02 * k
+        out = send(hub, pose("c0", int(k * 0.02 * S), 0.1 * k, 0.0, sd=sd))
+        refined += [o for o in out if o.track == messages.Track.REFINED]
+    fix = messages.new("PositionFix", timestamp_ns=int(3.98 * S), agent_id="c0", kind=Kind.MANUAL, x_m=19.9 + 1.0,
+                       y_m=0.0, covariance=[0.01, 0.0, 0.0, 0.01])
+    send(hub, fix)
+    refined += [o for o in hub.flush() if o.track == messages.Track.REFINED]
+    shift = {o.timestamp_ns: o.x_m - 0.1 * round(o.timestamp_ns / (0.02 * S)) for o in refined}
+    times = sorted(shift)
+    before_window = [shift[t] for t in times if t < 1.9 * S]
+    in_window = [shift[t] for t in times if t >= 2.0 * S]
+    assert max(abs(s) for s in before_window) < 1e-9  # already published before the fix: untouched
+    assert all(b >= a - 1e-12 for a, b in zip(in_window, in_window[1:]))  # grows towards the fix
+    assert 0.0 < in_window[0] < in_window[-1] <= 1.0
+
+
+def test_smoother_memory_is_bounded():
+    smoother = FixedLagSmoother(lag_s=1.0, max_entries=52)
+    cov = np.eye(3)
+    for k in range(10_000):
+        smoother.add(k * 20_000_000, np.zeros(2), 0.0, cov)
+        assert len(smoother.entries) <= 52
+
+
+def test_clock_offset_is_the_lower_envelope_of_arrival_minus_sample_time():
+    clocks = ClockOffsets(window_s=10.0)
+    rng = np.random.default_rng(1)
+    offset = 5 * S
+    for k in range(2000):
+        sample = k * 10_000_000
+        clocks.observe("s", sample, sample + offset + int((0.02 + rng.exponential(0.01)) * S))
+    assert abs(clocks.offset_ns("s") - (offset + 0.02 * S)) < 0.002 * S
+    assert clocks.offset_ns("unknown") == 0
+
+
+def video_fix(agent: str, t: int, x: float, y: float, sd: float = 0.085, source: str = "cam1:7"):
+    return messages.new("PositionFix", timestamp_ns=t, agent_id=agent, kind=Kind.VIDEO, x_m=x, y_m=y,
+                        covariance=[sd * sd, 0.0, 0.0, sd * sd], source_id=source)
+
+
+def test_the_covariance_the_edge_is_missing_grows_with_travel_and_time_and_shrinks_with_a_fix():
+    settings = HubSettings(corrections=frozenset({"camera"}), extra_m2_per_m=0.003, extra_m2_per_s=0.0005)
+    hub = ChairHub(venue(1), settings)
+    for k in range(101):  # 2 s, 5 m along x: 0.003 x 5 + 0.0005 x 2 = 0.016 m^2 per axis
+        send(hub, pose("c0", int(k * 0.02 * S), 2.5 * k * 0.02, 0.0, sd=0.05))
+    extra = hub.agents["c0"].extra
+    assert extra[0, 0] == pytest.approx(0.016, rel=1e-3) and extra[0, 1] == 0.0
+    published = send(hub, pose("c0", int(2.02 * S), 5.05, 0.0, sd=0.05))[0]
+    assert np.sqrt(published.covariance[0]) == pytest.approx(np.hypot(0.05, np.sqrt(extra[0, 0])), rel=1e-2)
+    send(hub, video_fix("c0", int(2.0 * S), 5.0, 0.0))
+    send(hub, pose("c0", int(2.04 * S), 5.1, 0.0, sd=0.05))
+    assert 0.0 < hub.agents["c0"].extra[0, 0] < 0.016  # the honest posterior holds less beyond the edge's
+
+
+def test_a_pose_off_by_a_metre_with_a_small_sd_is_repaired_by_a_consistent_video_track():
+    """The edge says 5 cm but sits 1 m off (a wrong fix taken, a shove): the gate refuses the right
+    track's fixes, until `relock_after` of them in a row agree on the offset."""
+    settings = HubSettings(corrections=frozenset({"camera"}), extra_m2_per_m=0.0, extra_m2_per_s=0.0)
+    hub = ChairHub(venue(1), settings)
+    taken = []
+    for k in range(300):  # 6 s standing, the edge at x = 10, the camera's track at x = 11
+        t = int(k * 0.02 * S)
+        sequence = hub.agents["c0"].sequence  # an edge that takes every correction at once
+        send(hub, pose("c0", t, 10.0, 5.0, sd=0.05, sequence=sequence))
+        if k % 50 == 10:
+            taken += corrections(send(hub, video_fix("c0", t, 11.0 + 0.02 * (k % 3), 5.0)))
+    assert hub.counters.gated_out == settings.relock_after - 1
+    assert hub.counters.relocks == 1 and len(taken) >= 2
+    assert taken[0].dx_m == pytest.approx(1.0, abs=0.05)
+    assert hub.agents["c0"].extra[0, 0] > 0.0  # the offset became uncertainty: later fixes pass the gate
+
+
+def test_fixes_from_different_tracks_or_with_scattered_offsets_do_not_relock():
+    settings = HubSettings(corrections=frozenset({"camera"}), extra_m2_per_m=0.0, extra_m2_per_s=0.0)
+    for sources, offsets in ((("cam1:1", "cam1:2", "cam1:1", "cam1:2"), (1.0, 1.0, 1.0, 1.0)),
+                             (("cam1:1",) * 4, (1.0, -1.0, 1.0, -1.0))):
+        hub = ChairHub(venue(1), settings)
+        for k in range(200):
+            t = int(k * 0.02 * S)
+            send(hub, pose("c0", t, 10.0, 5.0, sd=0.05))
+            if k % 50 == 10:
+                send(hub, video_fix("c0", t, 10.0 + offsets[k // 50], 5.0, source=sources[k // 50]))
+        assert hub.counters.relocks == 0 and hub.counters.gated_out == 4
+
+
+def test_a_fix_inside_a_gap_in_the_poses_is_compared_with_where_the_chair_was_then():
+    """The edge's poses stop for 2 s (its link stalled) while the chair rolls on at 1 m/s; a camera fix from
+    inside the gap must be compared with the poses around it, interpolated, not with the last pose before
+    it (1 m behind, with a 5 cm sd: that fix was refused as an outlier)."""
+    settings = HubSettings(corrections=frozenset({"camera"}), extra_m2_per_m=0.0, extra_m2_per_s=0.0, relock_after=0)
+    hub = ChairHub(venue(1), settings)
+    out = []
+    for k in range(301):  # 0-6 s along x at 1 m/s, no poses from 2 to 4 s
+        t_s = k * 0.02
+        if not 2.0 < t_s < 4.0:
+            out += send(hub, pose("c0", int(t_s * S), t_s, 5.0, sd=0.05))
+        if k == 100:
+            out += send(hub, video_fix("c0", int(3.0 * S), 3.02, 5.0))  # where the chair was at 3 s
+    taken = corrections(out)
+    assert hub.counters.gated_out == 0 and len(taken) == 1
+    assert taken[0].dx_m == pytest.approx(0.02, abs=0.02) and taken[0].dy_m == pytest.approx(0.0, abs=0.02)
