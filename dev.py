@@ -2,7 +2,8 @@
 """Set up and run reckon from a fresh clone: `python3 dev.py demo` or `python3 dev.py test`.
 
 Creates `.venv` beside this file on first use (and again when pyproject.toml changes), installs
-reckon with its test extras, then runs the demo, the tests, or any `reckon` subcommand.
+reckon with `[test]` (every extra of pyproject.toml plus the test tools), then runs the demo, the
+tests, or any `reckon` subcommand.
 """
 
 from __future__ import annotations

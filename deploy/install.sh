@@ -1,15 +1,17 @@
 #!/bin/sh
 # Install reckon on a Raspberry Pi OS (64-bit) hub or edge machine, from a clone of the repository.
 #
-#   sudo deploy/install.sh [--serial] [--ble] [--no-units]
+#   sudo deploy/install.sh [--hub] [--edge] [--serial] [--ble] [--no-units]
 #
+#   --hub       this machine runs the hub: reckon[hub] (neither --hub nor --edge: both)
+#   --edge      this machine runs edges (devices, phones): reckon[edge]
 #   --serial    this machine has USB serial IMUs (x-IMU3, TSND): the reckon user joins dialout
 #   --ble       this machine talks to BLE IMUs or scans beacons: BlueZ, and the bluetooth group
 #   --no-units  do not install the systemd units and the logrotate file (a test install)
 #
 # What it does (deploy/README.md says why and what comes next):
 #   system user and group `reckon` (no login, home /var/lib/reckon)
-#   /opt/reckon/venv       a virtual environment with reckon installed from this clone
+#   /opt/reckon/venv       a virtual environment with reckon[hub], reckon[edge] or both from this clone
 #   /opt/reckon/src        a copy of this clone's deploy/ folder (the docs the units point to)
 #   /etc/reckon            venue file, zenoh/ configs, tls/ certificates, edge/<agent>.env
 #   /var/lib/reckon        recordings/, spool/, numba-cache/ (the services' only writable place)
@@ -19,17 +21,29 @@
 # the installed package and units and keeps everything under /etc/reckon and /var/lib/reckon.
 set -eu
 
+hub=no
+edge=no
 serial=no
 ble=no
 units=yes
 for arg in "$@"; do
     case $arg in
+        --hub) hub=yes ;;
+        --edge) edge=yes ;;
         --serial) serial=yes ;;
         --ble) ble=yes ;;
         --no-units) units=no ;;
-        *) echo "usage: $0 [--serial] [--ble] [--no-units]" >&2; exit 2 ;;
+        *) echo "usage: $0 [--hub] [--edge] [--serial] [--ble] [--no-units]" >&2; exit 2 ;;
     esac
 done
+[ $hub = yes ] || [ $edge = yes ] || { hub=yes; edge=yes; }
+if [ $edge = no ] && { [ $serial = yes ] || [ $ble = yes ]; }; then
+    echo "$0: --serial and --ble are for a machine that runs edges: add --edge" >&2; exit 2
+fi
+# The runtime extras only (pyproject.toml): no simulator, evaluation or plotting on a venue machine.
+extras=""
+[ $hub = no ] || extras="hub"
+[ $edge = no ] || extras="${extras:+$extras,}edge"
 
 [ "$(id -u)" -eq 0 ] || { echo "$0: run as root (sudo)" >&2; exit 1; }
 clone=$(cd "$(dirname "$0")/.." && pwd)
@@ -53,7 +67,7 @@ fi
 install -d -m 0755 "$prefix"
 [ -x "$prefix/venv/bin/python" ] || python3 -m venv "$prefix/venv"
 "$prefix/venv/bin/pip" install --upgrade pip
-"$prefix/venv/bin/pip" install --upgrade "$clone"
+"$prefix/venv/bin/pip" install --upgrade "$clone[$extras]"
 rm -rf "$prefix/src"
 install -d -m 0755 "$prefix/src"
 cp -R "$clone/deploy" "$prefix/src/deploy"
@@ -74,4 +88,4 @@ if [ $units = yes ]; then
 fi
 
 "$prefix/venv/bin/reckon" --help >/dev/null
-echo "installed reckon into $prefix/venv; next: deploy/README.md, 'Venue file, certificates, passwords'"
+echo "installed reckon[$extras] into $prefix/venv; next: deploy/README.md, 'Venue file, certificates, passwords'"

@@ -1,1 +1,3 @@
-"""Per-device edge: decoders and constant-memory dead-reckoning cores (no I/O in the cores)."""
+"""Per-device edge: a package per agent kind (chair/, swim/, pedestrian/) of constant-memory
+dead-reckoning cores with no I/O, the decoders that turn device bytes into samples (decoders/),
+and the sources that read devices, one module per URL scheme (sources/, the only I/O here)."""

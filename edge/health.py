@@ -1,6 +1,6 @@
 """Per-sensor device health: what is wrong with a stream of `ImuBatch` messages, and its repair.
 
-    health = DeviceHealth("chair01", ranges=DEVICE_RANGES["ximu3"])
+    health = DeviceHealth("chair01", ranges=ximu3.DEVICE.full_scale)  # edge.decoders.ximu3
     for batch in health.push(raw_batch, arrival_ns):  # 0..n batches, in order, safe to estimate on
         ...
     status = health.status("chair01-seat", now_ns)  # a protocol DeviceStatus
@@ -30,7 +30,8 @@ Faults, how each is found, and what "handled" means here (docs/device-faults.md)
   is a frozen sensor or a driver repeating its last reading. Flagged while it lasts, counted in
   `stuck_samples_seen`; the samples pass on (see below).
 - saturation: an accel or gyro axis within `SATURATION_FRACTION` of the device's full scale
-  (`ranges`; None: unknown, not checked). Counted per sample in `saturated`, flagged.
+  (`ranges`: per sensor, from its decoder's `DEVICE.full_scale`, edge/decoders/devices.py, which
+  the source passes on; None: unknown, not checked). Counted per sample in `saturated`, flagged.
 - stale: no batch for `stale_s` of the edge's clock; disconnected: the source says so.
 
 Stuck and saturated samples still reach the chair estimator: the merger has no weights, and
@@ -52,19 +53,6 @@ SEEN_BATCHES = 64  # sequences remembered (a bit mask) to tell a duplicate from 
 SATURATION_FRACTION = 0.999  # at or above this fraction of full scale counts as saturated
 UINT32 = 1 << 32
 FLAG_NAMES = ("disconnected", "stale", "stuck", "saturated", "clock_jump", "out_of_order", "duplicate", "gap")
-
-# (accel full scale g, gyro full scale deg/s) of the devices we decode:
-# x-IMU3 datasheet +-16 g, +-2000 deg/s; TSND121/151 as the edge sets it up
-# (edge.decoders.tsnd.SETUP_ACC_RANGE_G / SETUP_GYRO_RANGE_DPS); Thingy:52 raw motion: the limits
-# of its int16 Q6.10 / Q11.5 wire format (the MPU-9250's range set by the firmware is not
-# reported, so only the wire's clipping is certain); phones: unknown (each model differs).
-DEVICE_RANGES: dict[str, tuple[float, float] | None] = {
-    "ximu3": (16.0, 2000.0),
-    "tsnd": (16.0, 2000.0),
-    "thingy52": (32768 / 1024, 32768 / 32),
-    "phone": None,
-}
-
 
 @dataclass(frozen=True)
 class HealthSettings:

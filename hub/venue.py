@@ -4,12 +4,13 @@
 `hub.chair.hub.ChairHub` corrects the wheelchairs (beacons, collisions, fixes); once a camera's
 first frame arrives, `hub.identity.engine.IdentityEngine` names its tracks from every agent's motion and
 its identified positions go to ChairHub as video fixes, like an operator's. Same interface as
-ChairHub: `on_message(message, arrival_ns) -> outputs`, `flush()`, `key_for(output)`.
+ChairHub: `on_message(message, arrival_ns) -> outputs`, `flush()`, `key_for(output)`. `clock`, if the
+caller gives one (a wall clock in seconds), times the identity engine's hops (`IdentityEngine.update_s`).
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -22,11 +23,13 @@ from protocol.session import Session
 
 class VenueHub:
     def __init__(self, session: Session, settings: HubSettings = HubSettings(),
-                 identity_settings: IdentitySettings = IdentitySettings()):
+                 identity_settings: IdentitySettings = IdentitySettings(),
+                 clock: Callable[[], float] | None = None):
         self.session = session
         self.chairs = ChairHub(session, settings)
         self.pedestrians = PedestrianHub(session)
         self.identity_settings = identity_settings
+        self.clock = clock
         self.identity: IdentityEngine | None = None
 
     @property
@@ -40,7 +43,8 @@ class VenueHub:
     def on_message(self, message: Any, arrival_ns: int) -> list[Any]:
         name = messages.type_name(message)
         if name == "CameraFrame" and self.identity is None and "camera" in self.chairs.settings.corrections:
-            self.identity = IdentityEngine(self.session, self.identity_settings, pose_of=self._pose_of)
+            self.identity = IdentityEngine(self.session, self.identity_settings, pose_of=self._pose_of,
+                                           clock=self.clock)
         out: list[Any] = []
         if self.identity is not None:
             for produced in self.identity.on_message(message):

@@ -20,8 +20,9 @@ Control keys (beside the data keys of `protocol.keys`, same `reckon/<venue>/...`
   query to it is a flush barrier, because the reply comes back only after every sample sent
   earlier on the same link has reached that process. Roles are the closed set `Role`.
 
-These builders live here, not in `protocol/keys.py`, only because that file belongs to another
-change; they follow its style and could move there.
+These builders live here, beside the encodings and the flush barrier that give the control keys
+their meaning; `protocol/keys.py` builds the data keys of the agents' streams. Both follow the same
+style (typed builders, ids checked by `protocol.keys.check_id`).
 """
 
 from __future__ import annotations

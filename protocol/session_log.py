@@ -24,7 +24,7 @@ from mcap_protobuf.writer import Writer
 
 from protocol import messages
 from protocol.errors import InputError
-from protocol.session import Session, session_from_dict, to_json
+from protocol.session import Session, load_toml, session_from_dict, to_json
 
 log = logging.getLogger(__name__)
 METADATA_NAME = "reckon.session"
@@ -174,6 +174,11 @@ def read_description(path: Path | str) -> Session:
     path = Path(path)
     problems: list[str] = []
     return description_from_records(path, iter_records(path, problems), problems)
+
+
+def session_description(path: Path | str) -> Session:
+    """A session description from a TOML file or from a session log's own record (`.mcap`)."""
+    return read_description(path) if Path(path).suffix == ".mcap" else load_toml(path)
 
 
 class LogMessages:

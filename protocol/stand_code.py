@@ -16,7 +16,8 @@ never succeeds, and it costs 11 characters; a full 256-bit tag (43 characters) w
 typical code from QR version 5 to 7 (45 to 53 mm printed at 1 mm per module) for no gain. The venue name is inside the
 tagged text, so a code cannot be moved between venues even if two share a key.
 
-Pure apart from the key file helpers: nothing here opens a camera, a socket or a clock.
+Pure: nothing here opens a file, a camera, a socket or a clock; the venue's key file is
+edge/sources/phone/stand_key.py.
 """
 
 from __future__ import annotations
@@ -24,20 +25,15 @@ from __future__ import annotations
 import base64
 import hashlib
 import hmac
-import logging
 import math
-import os
 import re
 import secrets
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 from protocol import messages
 from protocol.errors import ConfigError, InputError
 from protocol.session import Stand
-
-log = logging.getLogger(__name__)
 
 FORMAT_TAG = "RKS"  # reckon stand
 VERSION = 1
@@ -69,7 +65,8 @@ class StandCodeError(InputError):
         self.reason = reason
 
 
-def _check_key(key: bytes) -> None:
+def check_key(key: bytes) -> None:
+    """ConfigError unless `key` is KEY_BYTES bytes."""
     if not isinstance(key, bytes) or len(key) != KEY_BYTES:
         size = len(key) if isinstance(key, bytes) else type(key).__name__
         raise ConfigError(f"stand key: expected {KEY_BYTES} bytes, got {size}")
@@ -83,7 +80,7 @@ def _tag(body: str, key: bytes) -> str:
 def encode(stand: Stand, venue: str, key: bytes) -> str:
     """The code text for `stand` of `venue`: position rounded to 1 cm, angles to 0.01 deg.
     ConfigError when the venue name, stand id, a value's range or the key cannot make a valid code."""
-    _check_key(key)
+    check_key(key)
     for name, value in (("venue", venue), ("stand id", stand.id)):
         if not isinstance(value, str) or not _ID.fullmatch(value):
             raise ConfigError(f"stand code: {name} {value!r} must be 1-64 characters of A-Z a-z 0-9 _ -")
@@ -119,7 +116,7 @@ def decode(text: str, venue: str, key: bytes, stands: Sequence[Stand] = ()) -> S
     """The stand a scanned code describes, as the code says it (1 cm, 0.01 deg), once its tag is
     checked with `key`. With `stands` (the venue file's), the stand must be listed there and agree
     with it. StandCodeError(reason) for anything not to trust; ConfigError for a wrong-size key."""
-    _check_key(key)
+    check_key(key)
     if not text.startswith(FORMAT_TAG):
         raise StandCodeError(f"not a reckon stand code (it starts {text[:12]!r}, a stand code starts "
                              f"{FORMAT_TAG}{VERSION}{SEPARATOR})")
@@ -193,44 +190,9 @@ def scan_message(text: str, time_ns: int, agent_id: str, sensor_id: str, venue: 
 
 
 # ---------------------------------------------------------------------------------------------
-# The venue's key file: 64 hex digits and a newline, readable by its owner only.
+# The venue's key (its file, 64 hex digits, is read and written by edge/sources/phone/stand_key.py)
 
 
 def new_key() -> bytes:
     """A fresh random stand key."""
     return secrets.token_bytes(KEY_BYTES)
-
-
-def write_key(path: Path | str, key: bytes) -> None:
-    """Create `path` holding `key`, mode 0600. ConfigError if the file already exists (rotating a
-    key is a deliberate act: delete the old file first) or cannot be created."""
-    _check_key(key)
-    try:
-        # O_EXCL: never overwrite a key the venue's printed codes depend on.
-        descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    except FileExistsError:
-        raise ConfigError(f"{path}: a stand key file is already there; not overwriting it (to rotate the key, "
-                          "move it away first and print every stand's code again)") from None
-    except OSError as error:
-        raise ConfigError(f"{path}: cannot create the stand key file ({error.strerror})") from None
-    with os.fdopen(descriptor, "w", encoding="ascii") as file:
-        file.write(key.hex() + "\n")
-
-
-def load_key(path: Path | str) -> bytes:
-    """The stand key in `path`. ConfigError naming the path if it is missing, unreadable, or not
-    64 hex digits; a warning if others can read it."""
-    try:
-        text = Path(path).read_text(encoding="ascii").strip()
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no stand key file there (`reckon qr make` creates one; or give --key-file)") from None
-    except OSError as error:
-        raise ConfigError(f"{path}: cannot read the stand key file ({error.strerror})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not a stand key file (expected {2 * KEY_BYTES} hex digits, found binary)") from None
-    if len(text) != 2 * KEY_BYTES or re.fullmatch(r"[0-9a-fA-F]+", text) is None:
-        raise ConfigError(f"{path}: expected {2 * KEY_BYTES} hex digits (a {KEY_BYTES}-byte key), found "
-                          f"{len(text)} characters{'' if re.fullmatch(r'[0-9a-fA-F]*', text) else ' that are not all hex'}")
-    if os.name == "posix" and Path(path).stat().st_mode & 0o077:
-        log.warning("%s: the stand key is readable by other users; chmod 600 it", path)
-    return bytes.fromhex(text)

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from edge.base import EdgeSummary
 from edge.chair import kernel
 from edge.chair.estimator import N, ChairSettings, ChairState, Flag, position_update, start
 from edge.chair.merger import ChairMerger
@@ -27,7 +28,7 @@ NO_GATE = math.inf  # the hub gated the correction already, against the same pos
 
 
 class ChairEdge:
-    """`push(batch) -> [EstimatedPose | ImpactEvent]`, `correct(correction)`, `flush()`."""
+    """`push(batch) -> [EstimatedPose | ImpactEvent]`, `correct(correction)`, `flush()` (an edge.base.Edge)."""
 
     def __init__(self, agent: Agent, pose_rate_hz: float = 50.0, method: str = "reckon"):
         if not pose_rate_hz > 0:
@@ -60,6 +61,22 @@ class ChairEdge:
     def correct(self, correction: Any) -> None:
         """Queue a hub Correction; it is applied before the next sample (or with the next pose)."""
         self.corrections.append(correction)
+
+    def scan(self, scan: Any) -> None:
+        """A chair has no stands to scan."""
+
+    def warnings(self) -> list[str]:
+        return []
+
+    def summarise(self, summary: EdgeSummary) -> None:
+        summary.samples, summary.poses, summary.impacts = self.samples, self.poses, self.impacts
+        summary.corrections = self.corrections_applied
+        summary.extrapolated = self.merger.counters.extrapolated
+        summary.wheel_overrun = self.merger.counters.wheel_overrun
+        state = self.state
+        if state is not None:
+            mean = state.mean
+            summary.final_pose = (float(mean[0]), float(mean[1]), float(mean[2]))
 
     def pose(self, time_ns: int | None = None) -> Any:
         """The current pose as a message (None before the first sample)."""

@@ -1,10 +1,10 @@
-"""The per-chair filter compiled for throughput: `chair_estimator.step` over a whole batch at once.
+"""The per-chair filter compiled for throughput: `step` of edge/chair/estimator.py over a whole batch at once.
 
 Why: one Python `step` costs ~17 us (~60k samples/s), and the edge estimator's target in replay
 is >= 1 M samples/s per core. `run_batch` is a numba loop over flat arrays, with no allocation
 per sample, that does what calling `step` once per sample does: the same math in the same
 order (zero-rate update, gap bridging by the wheel-turn ratio, impact shove, BACKWARDS samples,
-the magnetometer aid). `chair_estimator.step` stays the readable reference: change the filter
+the magnetometer aid). edge/chair/estimator.py's `step` stays the readable reference: change the filter
 there first, then here; tests/edge/test_chair_kernel.py holds the kernel to it.
 
 Same operations in the same order round the same, so the two agree bit for bit (measured on
@@ -237,7 +237,7 @@ def run_batch(settings: np.ndarray, state: np.ndarray, times: np.ndarray,
 
 @njit(cache=True, inline='always')
 def _step(s, st, mean, cov, fit, work, dt, sample):
-    """`chair_estimator.step` for dt > 0, in place on the packed state; returns the flags."""
+    """edge/chair/estimator.py's `step` for dt > 0, in place on the packed state; returns the flags."""
     flags = GAP if dt > s[S_GAP] else 0
     accel_norm = math.sqrt(_sum3(sample[V_ACCEL] * sample[V_ACCEL], sample[V_ACCEL + 1] * sample[V_ACCEL + 1],
                                  sample[V_ACCEL + 2] * sample[V_ACCEL + 2]))

@@ -1,6 +1,7 @@
 """Device byte streams -> typed frames -> ImuBatch messages. Pure: no ports, no clock, no logging.
 
-`ximu3` decodes x-io x-IMU3 data messages (ASCII and binary) push-style; `samples` groups one
+`ximu3` decodes x-io x-IMU3 data messages (ASCII and binary) push-style, `tsnd` the ATR TSND121/151's,
+`ble_adverts` BLE advertisements and IMU notifications, `phone/` what a phone sends; `samples` groups one
 device's frames into fixed-size `ImuBatch` messages. The I/O adapters that read ports live in
 `edge.sources`.
 """

@@ -25,6 +25,7 @@ import uuid
 from dataclasses import dataclass
 from typing import Any, Mapping
 
+from edge.decoders.devices import DeviceDecoder
 from edge.decoders.ximu3 import MAG_UT_PER_AU, Frame, InertialFrame, MagnetometerFrame, Rejected, RejectReason
 from protocol.errors import ConfigError
 from protocol.session import beacon_identity
@@ -160,3 +161,9 @@ class ThingyMotionDecoder:
             self.nudged += 1
         self._last_us = time_us
         return time_us
+
+
+# A Thingy:52's raw motion: the limits of its int16 Q6.10 / Q11.5 wire format (the MPU-9250's range
+# set by the firmware is not reported, so only the wire's clipping is certain). Notifications are
+# datagrams, not a byte stream: `reckon fuzz --decoder ble` fuzzes them with the advertisement parsers.
+DEVICE = DeviceDecoder("thingy52", full_scale=(32768 * ACCEL_G_PER_LSB, 32768 * GYRO_DPS_PER_LSB))

@@ -46,6 +46,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Union
 
+from edge.decoders.devices import DeviceDecoder
 from edge.decoders.ximu3 import MAG_UT_PER_AU, InertialFrame, MagnetometerFrame, Rejected
 from protocol.errors import ConfigError
 
@@ -408,3 +409,10 @@ def setup_commands(rate_hz: float) -> bytes:
 def teardown_commands() -> bytes:
     """What a host sends before closing the port: stop."""
     return stop_measurement()
+
+
+# Full scales as the edge sets the device up (saturation: edge/health.py); `reckon fuzz` frames from
+# the simulated device's encoder, with garbage rich in the header and the 0x80/0x81 codes.
+DEVICE = DeviceDecoder("tsnd", full_scale=(float(SETUP_ACC_RANGE_G), float(SETUP_GYRO_RANGE_DPS)),
+                       new_decoder=TsndDecoder, sync_bytes=b"\x9a\x80\x81",
+                       fuzz_frames="sim_devices.devices.tsnd_encoder:fuzz_frames")

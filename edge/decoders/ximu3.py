@@ -40,6 +40,7 @@ import struct
 from dataclasses import dataclass
 from typing import Union
 
+from edge.decoders.devices import DeviceDecoder
 from protocol.errors import ConfigError
 
 Vector3 = tuple[float, float, float]
@@ -392,3 +393,9 @@ def _is_json_object(line: bytes) -> bool:
         return isinstance(json.loads(line), dict)
     except ValueError:  # JSONDecodeError and UnicodeDecodeError are both ValueErrors
         return False
+
+
+# The x-IMU3 datasheet's full scales, +-16 g and +-2000 deg/s (saturation: edge/health.py); `reckon
+# fuzz` frames from the simulated device's encoder, with garbage rich in LF, the binary ids and I/M.
+DEVICE = DeviceDecoder("ximu3", full_scale=(16.0, 2000.0), new_decoder=Ximu3Decoder,
+                       sync_bytes=b"\n\xc9\xcdIM,\r\xdb", fuzz_frames="sim_devices.devices.ximu3_encoder:fuzz_frames")

@@ -20,6 +20,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from edge.base import EdgeSummary
 from edge.pedestrian.estimator import PdrEstimator, PdrSettings, PdrStep, PhoneSample
 from edge.pedestrian.magnetic import VenueField
 from protocol import messages
@@ -47,7 +48,7 @@ class PedestrianCounters:
 
 
 class PedestrianEdge:
-    """`push(ImuBatch) -> [EstimatedPose]`, `scan(StandScan)`, `flush()`."""
+    """`push(ImuBatch) -> [EstimatedPose]`, `scan(StandScan)`, `flush()` (an edge.base.Edge)."""
 
     def __init__(self, agent: Agent, venue: Venue | None = None, estimator: DeadReckoning | None = None,
                  method: str = METHOD, sensor_id: str | None = None):
@@ -97,6 +98,16 @@ class PedestrianEdge:
 
     def flush(self) -> list[Any]:
         return []
+
+    def correct(self, correction: Any) -> None:
+        """The hub does not correct a phone's dead reckoning: a stand scan resets it."""
+
+    def warnings(self) -> list[str]:
+        return []
+
+    def summarise(self, summary: EdgeSummary) -> None:
+        summary.pedestrian = True
+        summary.samples, summary.poses, summary.final_pose = self.samples, self.counters.steps, self.last_pose
 
     def _pose(self, step: PdrStep) -> Any:
         self.last_pose = (step.x_m, step.y_m, step.heading_rad)

@@ -12,12 +12,13 @@ Anything else fails with ConfigError. Every message is stamped with the host clo
 default time.time_ns): BLE notifications carry no device time.
 
 One asyncio loop in one background thread runs all BLE work (bleak's callbacks arrive on that
-loop). Messages go into one bounded queue that blocks the loop when full rather than dropping;
-iterating the object yields them until `stop` is set and every source has flushed, and re-raises
-an exception from the BLE thread. A device that cannot be reached or loses its link is retried
+loop). Messages go into one bounded queue that blocks the loop when full rather than dropping
+(edge/sources/threaded.py); iterating the object yields them until `stop` is set and every source
+has flushed, and re-raises an exception from the BLE thread. A device that cannot be reached or loses its link is retried
 with exponential backoff until `stop`: one WARNING naming the address per retry, counts in
 `stats`. Samples received before a link loss are flushed as a (short) batch at once.
 Bluetooth missing or switched off before a source ever started is an error, not retried.
+Registered as the `ble` scheme (edge/sources/registry.py), with the doctor's `check_ble`.
 """
 
 from __future__ import annotations
@@ -25,22 +26,27 @@ from __future__ import annotations
 import asyncio
 import functools
 import logging
-import queue
 import re
 import threading
 import time
+from collections.abc import Iterable
 from contextlib import suppress
 from dataclasses import dataclass
-from typing import Any, Awaitable, Callable, Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any, Awaitable, Callable, Mapping, Sequence
 
 from bleak import BleakClient, BleakScanner
 from bleak.exc import BleakBluetoothNotAvailableError, BleakError
 
+from edge.decoders import ble_adverts
 from edge.decoders.ble_adverts import THINGY_RAW_MOTION_UUID, ThingyMotionDecoder, beacon_identities, normalize_identity
 from edge.decoders.samples import BatchSettings, ImuBatcher
 from edge.decoders.ximu3 import Rejected
-from protocol import messages
+from edge.sources.registry import CheckRequest, Finding, Level, OpenRequest, Scheme, Spec, live_session
+from edge.sources.threaded import ThreadedSource
+from protocol import keys, messages
 from protocol.errors import ConfigError
+from protocol.session import Session
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +58,6 @@ _EXPECTED = "expected ble://AA:BB:CC:DD:EE:FF (a Thingy:52 IMU) or ble://scan (b
 RADIO_ERRORS = (BleakError, TimeoutError, OSError)
 STOP_POLL_S = 0.05  # how often the BLE loop looks at the `stop` threading.Event
 DISCONNECT_TIMEOUT_S = 5.0  # a hang-up that takes longer is abandoned (BlueZ drops the link itself)
-SHUTDOWN_GRACE_S = 2.0  # after stop, a full queue nobody drains is given up on after this
 _REPORT_AT = frozenset(10**k for k in range(12))  # rejected-notification counts that get a WARNING
 
 
@@ -106,16 +111,15 @@ class _Imu:
     stats: LinkStats
 
 
-class BleSources:
+class BleSources(ThreadedSource):
     """Iterable of protocol messages from BLE devices; see the module docstring."""
-
-    _DONE = object()
 
     def __init__(self, specs: Sequence[tuple[str, str]], agent_id: str, beacons_by_identity: Mapping[str, str],
                  stop: threading.Event, *, client_factory: Callable[..., Any] = BleakClient,
                  scanner_factory: Callable[..., Any] = BleakScanner, clock_ns: Callable[[], int] = time.time_ns,
                  retry: Retry = Retry(), batch_settings: BatchSettings | None = None, queue_size: int = 1000):
-        self.agent_id, self.stop = agent_id, stop
+        super().__init__(stop, queue_size)
+        self.agent_id = agent_id
         self._client_factory, self._scanner_factory, self._clock_ns = client_factory, scanner_factory, clock_ns
         self.retry = retry
         self.beacons = {normalize_identity(identity, f"beacon {beacon_id!r}"): beacon_id
@@ -126,10 +130,7 @@ class BleSources:
         self.stats = {imu.sensor_id: imu.stats for imu in self.imus}
         if self.scanner:
             self.stats[self.scanner[0]] = self.scanner[1]
-        self.queue: queue.Queue[Any] = queue.Queue(maxsize=queue_size)
-        self.dropped_at_shutdown = 0
-        self._thread = threading.Thread(target=self._run, name="ble-sources", daemon=True)
-        self._thread.start()
+        self.start(lambda: asyncio.run(self._main()), name="ble-sources")
 
     def _add_specs(self, specs: Sequence[tuple[str, str]], batch_settings: BatchSettings | None) -> None:
         if not specs:
@@ -155,9 +156,7 @@ class BleSources:
     @property
     def device_ranges(self) -> dict[str, tuple[float, float] | None]:
         """Full scales per IMU, for saturation (edge/health.py)."""
-        from edge.health import DEVICE_RANGES
-
-        return {imu.sensor_id: DEVICE_RANGES["thingy52"] for imu in self.imus}
+        return {imu.sensor_id: ble_adverts.DEVICE.full_scale for imu in self.imus}
 
     def link(self, sensor_id: str) -> tuple[bool, int, float]:
         """(connected, reconnects, battery_pct); the battery service is not read yet (-1)."""
@@ -166,52 +165,9 @@ class BleSources:
             return False, 0, -1.0
         return stats.connects > stats.link_losses, stats.reconnects, -1.0
 
-    def __iter__(self) -> Iterator[Any]:
-        while True:
-            try:
-                item = self.queue.get(timeout=STOP_POLL_S)
-            except queue.Empty:
-                if not self._thread.is_alive() and self.queue.empty():
-                    return  # its _DONE was given up on at shutdown
-                continue
-            if item is self._DONE:
-                return
-            if isinstance(item, BaseException):
-                raise item
-            yield item
-
-    def join(self, timeout: float | None = None) -> bool:
-        """Wait for the BLE thread to end (after `stop`); True if it has."""
-        self._thread.join(timeout)
-        return not self._thread.is_alive()
-
-    # -- BLE thread -------------------------------------------------------------------------------
-
-    def _run(self) -> None:
-        try:
-            asyncio.run(self._main())
-        except Exception as error:  # handed to the consumer, raised there
-            self._put(error)
-        finally:
-            self._put(self._DONE)
-
-    def _put(self, item: Any) -> None:
-        """Blocks while the queue is full (this stalls the BLE loop: back-pressure, not loss).
-        Only after `stop`, a queue that nobody has drained for SHUTDOWN_GRACE_S is given up on."""
-        waited = 0.0
-        while True:
-            try:
-                self.queue.put(item, timeout=STOP_POLL_S)
-                return
-            except queue.Full:
-                waited = waited + STOP_POLL_S if self.stop.is_set() else 0.0
-                if waited >= SHUTDOWN_GRACE_S:
-                    self.dropped_at_shutdown += 1
-                    return
-
     def _put_all(self, items: list[Any], stats: LinkStats) -> None:
         for item in items:
-            self._put(item)
+            self.put(item)  # blocks while the queue is full: this stalls the BLE loop (back-pressure, not loss)
         stats.messages += len(items)
 
     async def _main(self) -> None:
@@ -347,3 +303,50 @@ class BleSources:
         if not sightings:
             stats.ignored_adverts += 1
         self._put_all(sightings, stats)
+
+
+def open_ble(request: OpenRequest) -> tuple[Session, Iterable[Any]]:
+    """Thingy:52 IMUs, one per sensor, and at most one `RECEIVER=ble://scan` for the venue's beacons
+    that have an `identity`. Everything is checked before any radio work starts."""
+    imus: list[Spec] = []
+    scans: list[Spec] = []
+    for spec in request.specs:
+        try:
+            address = parse_ble_url(spec.url)
+        except ConfigError as error:
+            raise ConfigError(f"--source {spec.given!r}: {error}") from None
+        if address != SCAN:
+            imus.append(spec)
+            continue
+        keys.check_id(spec.sensor_id, f"--source {spec.given!r}: the receiver id")
+        if scans:
+            raise ConfigError(f"--source {spec.given!r}: one ble://scan per edge (already given as {scans[0].given!r})")
+        scans.append(spec)
+    session, _ = live_session(request, "BLE sources", sensors=imus)
+    beacons_by_identity = {b.identity: b.id for b in session.venue.beacons if b.identity}
+    if scans and not beacons_by_identity:
+        raise ConfigError(f"--source {scans[0].given!r}: no beacon in {request.venue_toml} has an identity to listen "
+                          "for (set identity = \"ibeacon:<uuid>:<major>:<minor>\" or \"eddystone:<namespace>:"
+                          "<instance>\" in the beacon's [[venue.beacons]] table)")
+    return session, BleSources([(spec.sensor_id, spec.url) for spec in imus + scans], request.agent_id,
+                               beacons_by_identity, request.stop, **request.factories)
+
+
+def check_ble(request: CheckRequest) -> list[Finding]:
+    """bleak is importable (this module is), an adapter is listed, and a scan has identities to
+    listen for. The device itself is not contacted."""
+    address = parse_ble_url(request.url)
+    sysfs: Path = request.bluetooth_sysfs
+    adapters = sorted(p.name for p in sysfs.glob("hci*")) if sysfs.is_dir() else []
+    if not adapters:
+        return [Finding(Level.WARN, f"no Bluetooth adapter listed in {sysfs}",
+                        "plug in a Bluetooth dongle or enable Bluetooth (`bluetoothctl list`); not checked off Linux")]
+    session = request.session
+    if address == SCAN and session is not None and not any(b.identity for b in session.venue.beacons):
+        return [Finding(Level.FAIL, "no beacon in the venue file has an identity to listen for",
+                        "set identity in each [[venue.beacons]] table")]
+    return [Finding(Level.OK, f"bleak importable, adapter {', '.join(adapters)} (device not contacted)")]
+
+
+SCHEME = Scheme("ble", "SENSOR=ble://AA:BB:CC:DD:EE:FF or RECEIVER=ble://scan", open_ble, check_ble,
+                sensor=lambda url: url != f"ble://{SCAN}")

@@ -26,22 +26,34 @@ decoded plus the partial message the decoder held (a TRUNCATED Rejected), all of
 to `record_raw`. A port that cannot
 be opened raises `DeviceUnavailable`. Both are `protocol.errors.ReckonError`s (via `DeviceError`),
 so the CLI prints one line; a caller that wants to reconnect catches `DeviceDisconnected`.
+
+`SerialSources` is the edge's source for `SENSOR=serial://...` (one reader thread per device,
+reconnecting), registered as the `serial` scheme (edge/sources/registry.py) with the doctor's
+`check_serial`.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections import Counter
+from collections.abc import Iterable
 from typing import Any, Callable, Iterator, NoReturn, Protocol, Sequence
 from urllib.parse import parse_qs, urlsplit
 
 import serial
 
+from edge.decoders import tsnd, ximu3
+from edge.decoders.devices import DeviceDecoder
+from edge.decoders.samples import ImuBatcher
 from edge.decoders.tsnd import TsndDecoder, period_for_rate, setup_commands, teardown_commands
-from edge.decoders.ximu3 import Ximu3Decoder
+from edge.decoders.ximu3 import InertialFrame, Ximu3Decoder
+from edge.sources.registry import CheckRequest, Finding, Level, OpenRequest, Scheme, live_session
+from edge.sources.threaded import ThreadedSource
 from protocol.errors import ConfigError, ReckonError
+from protocol.session import Session
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +62,7 @@ DEFAULT_READ_TIMEOUT_S = 0.05
 READ_SIZE = 4096  # bytes asked of one read; a read returns what has arrived, up to this
 WRITE_TIMEOUT_S = 1.0  # a device that takes no command within this is treated as gone
 URL_KEYS = ("baud", "read_timeout_s", "protocol", "rate_hz")
-PROTOCOLS = ("ximu3", "tsnd")
+PROTOCOLS: dict[str, DeviceDecoder] = {"ximu3": ximu3.DEVICE, "tsnd": tsnd.DEVICE}  # a URL's `protocol`
 DEFAULT_TSND_RATE_HZ = 1000.0  # the swimming paper's rate
 
 
@@ -259,3 +271,134 @@ class SerialSource:
                     self.url, total, now - self._last_warning, reasons, self.bytes_read)
         self._unreported.clear()
         self._last_warning = now
+
+
+class SerialSources(ThreadedSource):
+    """One reader thread per `SENSOR=serial://PORT?...` source, all feeding one blocking queue.
+
+    Each URL's `protocol` picks the decoder and the commands (SerialSource.from_url: an x-IMU3
+    streams on its own, a TSND is set up and started on open, stopped on close).
+    Ports are opened here, at once, so a device that is missing fails before anything starts.
+    A device that goes away (link lost, unplugged, a read error) keeps its last frames; its reader
+    then tries to open the port again, first after `RETRY_S`, the wait doubling up to `MAX_RETRY_S`,
+    and carries on when the device is back (a by-id path that points at the new port finds it),
+    for up to `reconnect_s`; after that its stream ends. `link(sensor)` says whether a sensor is
+    connected and how often it came back; `device_ranges` its full scales (for saturation).
+    Iterating yields ImuBatch messages, each stamped with the host clock at its arrival, until
+    every stream has ended or `stop` is set.
+    """
+
+    RETRY_S = 0.1
+    MAX_RETRY_S = 2.0
+
+    def __init__(self, specs: list[tuple[str, str]], agent_id: str, stop: threading.Event, reconnect_s: float = 30.0):
+        super().__init__(stop)
+        self.reconnect_s = reconnect_s
+        self.reconnects = 0
+        self.sources = [(url, SerialSource.from_url(url).open(), ImuBatcher(agent_id, sensor_id))
+                        for sensor_id, url in specs]
+        self.connected = {sensor_id: True for sensor_id, _ in specs}
+        self.reconnects_by_sensor = {sensor_id: 0 for sensor_id, _ in specs}
+        self.device_ranges = {sensor_id: PROTOCOLS[parse_serial_protocol(url)[0]].full_scale for sensor_id, url in specs}
+        for url, source, batcher in self.sources:
+            self.start(self._read, url, source, batcher, name=f"serial {batcher.sensor_id}")
+
+    def _put(self, batches: list[Any]) -> None:
+        now = time.time_ns()
+        for batch in batches:
+            batch.received_ns = now
+            self.put(batch)
+
+    def _read(self, url: str, source: Any, batcher: Any) -> None:
+        decoder = source.decoder  # kept across reconnects: its counters and device clock carry on
+        try:
+            while not self.stop.is_set():
+                try:
+                    while not self.stop.is_set():
+                        self._put(batcher.feed(source.read_frames()))
+                except DeviceDisconnected as gone:
+                    self.connected[batcher.sensor_id] = False
+                    self._put(batcher.feed(gone.frames))
+                    source.close()
+                    log.warning("%s; trying to reopen it for %.0f s", gone, self.reconnect_s)
+                    source = None
+                    deadline = time.monotonic() + self.reconnect_s
+                    delay = self.RETRY_S
+                    while source is None and time.monotonic() < deadline and not self.stop.wait(delay):
+                        delay = min(2 * delay, self.MAX_RETRY_S)
+                        try:
+                            source = SerialSource.from_url(url, decoder=decoder).open()
+                        except DeviceUnavailable:
+                            continue
+                    if source is None:
+                        return
+                    self.reconnects += 1
+                    self.reconnects_by_sensor[batcher.sensor_id] += 1
+                    self.connected[batcher.sensor_id] = True
+                    log.warning("%s is back (reconnect %d)", url, self.reconnects)
+        finally:
+            self.connected[batcher.sensor_id] = False
+            self._put(batcher.flush())
+            if source is not None:
+                source.close()
+
+    def link(self, sensor_id: str) -> tuple[bool, int, float]:
+        """(connected, reconnects, battery_pct): neither an x-IMU3 nor a TSND stream says its battery."""
+        return self.connected.get(sensor_id, False), self.reconnects_by_sensor.get(sensor_id, 0), -1.0
+
+
+def open_serial(request: OpenRequest) -> tuple[Session, Iterable[Any]]:
+    """One serial device per sensor of the agent (the venue file says which sensor is where)."""
+    for spec in request.specs:
+        parse_serial_url(spec.url)
+    session, _ = live_session(request, "serial sources")
+    return session, SerialSources([(spec.sensor_id, spec.url) for spec in request.specs], request.agent_id,
+                                  request.stop, request.reconnect_s)
+
+
+SERIAL_FRAMES = 100  # inertial frames that are plenty to tell the protocol and the rate
+
+
+def check_serial(request: CheckRequest) -> list[Finding]:
+    """The port exists and opens; then a listen of up to `listen_s` for frames of the URL's protocol,
+    their rate by the device clock against the venue file's."""
+    url, listen_s, rate_hz = request.url, request.listen_s, request.rate_hz
+    port, _, _ = parse_serial_url(url)
+    if port.startswith("/") and not os.path.exists(port):
+        return [Finding(Level.FAIL, f"{port} does not exist",
+                        "plug the device in and power it; `ls /dev/serial/by-id/` lists the serial devices present")]
+    if port.startswith("/") and not os.access(port, os.R_OK | os.W_OK):
+        return [Finding(Level.FAIL, f"no permission to open {port}",
+                        "add the user to the dialout group (`sudo usermod -aG dialout $USER`, then log in again)")]
+    source = SerialSource.from_url(url)
+    try:
+        source.open()
+    except DeviceError as error:
+        return [Finding(Level.FAIL, str(error), "is another program (an edge) using the port?")]
+    frames: list[Any] = []
+    deadline = time.monotonic() + listen_s
+    try:
+        with source:
+            while time.monotonic() < deadline and sum(isinstance(f, InertialFrame) for f in frames) < SERIAL_FRAMES:
+                frames += source.read_frames()
+    except DeviceError as error:
+        return [Finding(Level.FAIL, f"opened, then lost: {error}", "check the cable or the Bluetooth link")]
+    inertial = [f for f in frames if isinstance(f, InertialFrame)]
+    rejected = sum(getattr(f, "reason", None) is not None for f in frames)
+    if source.bytes_read == 0:
+        return [Finding(Level.WARN, f"{port} opens, but sent nothing in {listen_s:g} s",
+                        "is the device on and streaming? an x-IMU3 streams on its own; a TSND needs ?protocol=tsnd")]
+    if not inertial:
+        return [Finding(Level.FAIL, f"{source.bytes_read} bytes in {listen_s:g} s, no valid frame ({rejected} "
+                        "rejected)", "wrong protocol or baud rate in the URL (?protocol=, ?baud=)")]
+    span_s = (inertial[-1].timestamp_us - inertial[0].timestamp_us) * 1e-6
+    measured = (len(inertial) - 1) / span_s if len(inertial) > 1 and span_s > 0 else None
+    text = (f"{len(inertial)} inertial frames decoded from {source.bytes_read} bytes ({rejected} rejected)"
+            + (f", {measured:.0f} Hz by the device clock" if measured else ""))
+    if measured and rate_hz and abs(measured - rate_hz) > 0.1 * rate_hz:
+        return [Finding(Level.WARN, f"{text}; the venue file says rate_hz {rate_hz:g}",
+                        "set the device's rate, or rate_hz in the venue file, so that they agree")]
+    return [Finding(Level.OK, text)]
+
+
+SCHEME = Scheme("serial", "SENSOR=serial://PORT?baud=N[&protocol=tsnd&rate_hz=N]", open_serial, check_serial)

@@ -1,1 +1,2 @@
-"""A swimmer's waist sensor: attitude and rows, walls, our per-length estimate, and the paper's (`paper.py`)."""
+"""A swimmer's sensors (waist, back, head, a kickboard): attitude and rows, walls, our per-length estimate, and the
+paper's (`paper.py`)."""

@@ -10,12 +10,12 @@ for the next push-off.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from edge.base import EdgeSummary
 from edge.swim import walls
 from edge.swim.bins import BIN_HZ, COLUMNS, BinSettings, BodyBinner
 from edge.swim.length import RestGyro, YawDrift, lane_reading, reckon_length
@@ -23,7 +23,6 @@ from edge.swim.paper import LengthEstimate
 from protocol import messages
 from protocol.session import Agent, Mount, Route, Sensor
 
-log = logging.getLogger(__name__)
 MAX_LENGTH_S = 300.0  # a 25 m length takes 15-60 s; a 50 m one up to 2 min
 PRE_PUSH_S = 2.0  # rows kept before a push-off (its onset search looks back)
 TURN_WAIT_S = 6.0  # after a heading reversal, the push-off comes within this, or the set has ended
@@ -48,12 +47,12 @@ class TrackerCounters:
 
 
 class SwimTracker:
-    """One sensor: `push(time_ns, accel_g, gyro_dps) -> [LengthEstimate]`, `flush()`."""
+    """One sensor: `push_samples(time_ns, accel_g, gyro_dps) -> [LengthEstimate]` (or `push_rows(rows)`), `flush()`."""
 
     def __init__(self, sensor: Sensor, pool_length_m: float, route: Route, max_length_s: float = MAX_LENGTH_S):
         self.binner = BodyBinner(BinSettings(sensor.rate_hz, sensor.forward_axis or "+x", sensor.left_axis or "+y"))
         self.pool_length_m, self.route = pool_length_m, route
-        self.board = sensor.mount is Mount.KICKBOARD  # its touch: swim_walls.touch_in
+        self.board = sensor.mount is Mount.KICKBOARD  # its touch: walls.touch_in
         self.capacity = walls.rows_for(max_length_s + PRE_PUSH_S + TURN_WAIT_S + 5.0)
         self.rows = np.zeros((self.capacity, len(COLUMNS)))
         self.n = 0
@@ -61,10 +60,10 @@ class SwimTracker:
         self.push: int | None = None  # row of the current length's push-off onset
         self.reversal: int | None = None  # row of a heading reversal waiting for its push-off
         # The heading's drift rate, carried from length to length, for every mounting. A kickboard's heading is
-        # the board's, turned by hand at the wall: learning it made its diagonals worse (-9.2 / 26.1 % against
-        # -8.3 / 27.5 without, simulated sets, seeds 1-6) while the velocity's zero was the next push-off;
-        # with the zero at the touch it helps (diagonal -2.00 / 8.96 % RMS 4.09 -> -1.72 / 5.24 RMS 3.04,
-        # straight +0.17 / 0.56 -> +0.02 / 0.16): YawDrift's gate refuses the hand turns' readings.
+        # the board's, turned by hand at the wall, yet learning it helps with the velocity's zero at the touch
+        # (simulated sets, seeds 1-6: diagonal -1.72 / 5.24 % RMS 3.04 against -2.00 / 8.96 % RMS 4.09 without,
+        # straight +0.02 / 0.16 against +0.17 / 0.56): YawDrift's gate refuses the hand turns' readings. With
+        # the zero at the next push-off it would not (diagonal -9.2 / 26.1 % against -8.3 / 27.5 without).
         self.drift = YawDrift()
         self.rest = RestGyro()  # the gyro's offset read at rest before a set, for its first length
         self.counters = TrackerCounters()
@@ -167,9 +166,12 @@ class SwimTracker:
         if self.reversal is not None:
             self.reversal -= first
 
+    def overlong_warning(self) -> str:
+        """The line to log for each buffer dropped (counters.overlong): the caller logs it, this core has no I/O."""
+        return f"no wall for {self.capacity / BIN_HZ:.0f} s: dropping the length in progress"
+
     def _drop_overlong(self) -> None:
         self.counters.overlong += 1
-        log.warning("no wall for %.0f s: dropping the length in progress", self.capacity / BIN_HZ)
         self.push, self.reversal = None, None
         self._shift(self.n - walls.rows_for(PRE_PUSH_S))
 
@@ -185,7 +187,7 @@ def pick_zero_end(estimates: list[LengthEstimate]) -> LengthEstimate:
 
 @dataclass
 class SwimEdge:
-    """A swimmer's sensors: `push(batch) -> [SwimLength]`, `flush() -> [SwimLength]`."""
+    """A swimmer's sensors: `push(batch) -> [SwimLength]`, `flush() -> [SwimLength]` (an edge.base.Edge)."""
 
     agent: Agent
     pool_length_m: float
@@ -193,6 +195,7 @@ class SwimEdge:
     trackers: dict[str, SwimTracker] = field(default_factory=dict)
     indices: dict[str, int] = field(default_factory=dict)
     samples: int = 0
+    warned: dict[str, int] = field(default_factory=dict)  # per sensor, the dropped buffers already in warnings()
 
     def __post_init__(self) -> None:
         for sensor in self.agent.sensors:
@@ -211,6 +214,25 @@ class SwimEdge:
 
     def flush(self) -> list[Any]:
         return [self._message(sensor_id, e) for sensor_id, tracker in self.trackers.items() for e in tracker.flush()]
+
+    def warnings(self) -> list[str]:
+        """A line for each length in progress dropped since the last call (no wall within its tracker's
+        max_length_s), for the process to log."""
+        out: list[str] = []
+        for sensor_id, tracker in self.trackers.items():
+            out += [tracker.overlong_warning()] * (tracker.counters.overlong - self.warned.get(sensor_id, 0))
+            self.warned[sensor_id] = tracker.counters.overlong
+        return out
+
+    def correct(self, correction: Any) -> None:
+        """The hub does not correct a swimmer's lengths."""
+
+    def scan(self, scan: Any) -> None:
+        """A pool has no stands to scan."""
+
+    def summarise(self, summary: EdgeSummary) -> None:
+        summary.swimmer = True
+        summary.samples, summary.lengths = self.samples, sum(self.indices.values())
 
     def _message(self, sensor_id: str, estimate: LengthEstimate) -> Any:
         self.indices[sensor_id] += 1

@@ -23,9 +23,9 @@ All times here are venue time: device timestamps plus each device's clock offset
 Honest covariance. An edge's covariance is its filter's, and after a run of video fixes it states
 a few centimetres while the chair's true error grows faster than the edge's process noise says
 (slips, shoves, a wrong fix taken): measured on a 120 s game with camera fixes, the live pose's
-squared error was 4.9 times its stated covariance at the median (NEES; 2 if honest), 12 on
-average, so the gate refused correct fixes from well-identified tracks for seconds at a time. The
-hub therefore keeps, per agent, the covariance the edge is missing (`AgentView.extra`): it grows
+squared error is 4.9 times the edge's stated covariance at the median (NEES; 2 if honest), 12 on
+average, so a gate on that covariance alone refuses correct fixes from well-identified tracks for
+seconds at a time. The hub therefore keeps, per agent, the covariance the edge is missing (`AgentView.extra`): it grows
 with the chair's travel and with time, and shrinks with each correction as the honest update
 (the edge's gain, applied to the edge's covariance + extra) says. The gate of fixes (video and
 an operator's), the published live poses and the identity engine's position cue use the honest
@@ -451,7 +451,7 @@ class ChairHub:
         The edge applies its own gain (from its covariance P); `extra` becomes what the honest posterior
         of that update (Joseph form, prior P + extra) holds beyond the edge's. Sending a smaller
         measurement covariance instead, so that the edge would apply the honest gain, also scales the
-        edge's heading update and diverged (a 120 s game without camera: 0.70 -> 9.6 m)."""
+        edge's heading update and diverges (a 120 s game without camera: 9.6 m against 0.70 m)."""
         prior = view.covariance[:2, :2]
         honest = prior + view.extra
         gain = prior @ np.linalg.inv(prior + covariance)

@@ -1,1 +1,2 @@
-"""Who is which camera track: the streaming engine, its cues, rules and assignment; the paper's permutation search in `paper/`."""
+"""Who is which camera track: the streaming engine, its settings, records, cues, rules and assignment; the paper's
+permutation search in `paper/`."""

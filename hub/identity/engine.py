@@ -1,38 +1,37 @@
 """Who is which camera track: streaming association of anonymous tracks with the agents' sensors.
 
 The camera-identity paper (hub/identity/paper/search.py) scores whole fragments offline and tries every
-order of people. Here every hop (HOP_S of camera time) the newest bins of motion cues
+order of people. Here every hop (hop_s of camera time) the newest bins of motion cues
 (hub/identity/cues.py) of every live track are compared with every agent's:
 - speed: a chair's dead-reckoned speed, a pedestrian's from its waist activity (the paper's cue);
 - turn rate: gyro about the vertical against the rotation of the track's velocity;
 - moving or still;
+- direction (chairs): a moving track's course against the dead-reckoned one, less the pair's usual angle;
 - position: the track against where the agent was last seen or, for a chair, the hub's pose;
 - stature (trackers that report head heights): how much worse the agent's motion has matched tracks
   of this head height than of its best-matching one, over the session (StatureProfile).
 Each bin gives a normalised squared error per cue (about 1 for the right pair). A pair's evidence
-is the forgetting mean of its bins' costs (factor FORGET_PER_S per second, after a prior that
+is the forgetting mean of its bins' costs (factor forget_per_s per second, after a prior that
 makes a new track earn its identity). The assignment is the Hungarian method (scipy) over tracks
-and agents with "nobody" on both sides at NOBODY_COST, the current pairs favoured by
-SWITCH_MARGIN so identities do not flicker. Work per hop is tracks x agents x new bins.
+and agents with "nobody" on both sides at nobody_cost, the current pairs favoured by
+switch_margin so identities do not flicker. Work per hop is tracks x agents x new bins.
 
-An identified track gives its agent a PositionFix (kind VIDEO) every FIX_EVERY_S while the pair's
+An identified track gives its agent a PositionFix (kind VIDEO) every fix_every_s while the pair's
 evidence is clear; the hub turns it into a correction like any fix. An agent without a track is
 carried by its own dead reckoning (the hub's pose) until a track matches again.
 The camera's clock offset is searched on the identified chairs every lag_every_s, within max_lag_s
 of lag_prior_s in total (pedestrians' turn rates do not separate pairs: docs/identity.md).
 
 Four rules follow the tracker's own errors (docs/identity.md): continuation of a broken-off track,
-births, encounters and shares. They live in hub/identity/rules.py (`TrackRules`, which IdentityEngine
-inherits, with the track records `_Track` and `_Lost`); this module holds the settings, the counters and
-the engine: inputs, the hop's scoring, the assignment (solved in independent parts), fixes and the
-camera's clock offset.
+births, encounters and shares; they are hub/identity/rules.py (`TrackRules`, a part of the engine that
+works on its track records, hub/identity/book.py). The settings and counters are hub/identity/settings.py.
+This module is the engine: inputs, the hop's scoring, the assignment (solved in independent parts),
+fixes and the camera's clock offset.
 """
 
 from __future__ import annotations
 
-import time
 from collections import deque
-from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
@@ -40,115 +39,31 @@ from scipy.optimize import linear_sum_assignment
 
 from hub.clocks import ClockOffsets
 from hub.identity.assign import BIG, components, exclusion_margin, padded, swap_bound
+from hub.identity.book import Lost, Track, identity_message
 from hub.identity.cues import (BIN_NS, BIN_S, MOVING_MPS, TRACK_DELAY_BINS, TURN_BINS, AgentCues, StatureProfile,
                                SpeedModel, TrackCues, agent_hop_blocks, track_hop_cues)
-from hub.identity.rules import START_SD_M as START_SD_M  # re-exported; the birth rule uses it
-from hub.identity.rules import TrackRules, _Lost, _Track
+from hub.identity.rules import TrackRules
+from hub.identity.settings import IdentityCounters, IdentitySettings
 from protocol import messages
 from protocol.messages import CorrectionKind
 from protocol.session import AgentKind, Mount, Session
 
-METHOD = "reckon"
 # how far a seated head is below the stature: seat + sitting height ~0.52 x stature (docs/simulator-room.md)
 SEATED_DROP_M = (0.33, 0.38, 0.43)
 
 
-@dataclass(frozen=True)
-class IdentitySettings:
-    hop_s: float = 0.2  # 0.5 before the scoring waited for the agents' data (120 s games, seeds 1-3: docs/identity.md)
-    delay_s: float = 0.2  # bins are scored at least this long after the camera saw them, once every live agent's
-    max_delay_s: float = 1.0  # ... data has reached them, but never later than this (a silent device holds none back)
-    forget_per_s: float = 0.7  # evidence half-life about 2 s: a tracker's swap is followed within seconds
-    fast_forget_per_s: float = 0.2  # ... and a fast mean (half-life 0.4 s) that overrides it where recent bins disagree
-    fast_margin: float = 0.5  # ... by more than this (0: a wrong pair claimed on a camera 0.2 s off, tests)
-    pedestrian_forget_per_s: float = 0.8  # ... a pedestrian's (half-life 3.1 s): its cues are weak per bin, and a
-    # room's tracker breaks tracks rather than swapping them
-    prior_bins: float = 4.0  # a new pair starts with this many bins at prior_cost
-    prior_cost: float = 2.0
-    # each side; a pair is taken when its evidence is below twice this. 0.6 before the hub's honest
-    # covariance; now 0.7: 120 s games, seeds 1-3, live 91.9 / 95.4 / 95.9 -> 93.3 / 95.7 / 96.2 %
-    nobody_cost: float = 0.7
-    claim_margin: float = 0.3  # a new identity must be this much better than the best assignment without it
-    max_claims: int = 8  # new identities examined per hop (each costs one more assignment); the rest wait
-    switch_margin: float = 0.4
-    fix_every_s: float = 1.0
-    fix_cost: float = 0.6  # evidence needed to send a fix
-    fix_after_s: float = 2.0  # ... held for this long
-    track_timeout_s: float = 0.3  # a tracker reports every frame; one that comes back gets a new id anyway
-    continue_max_s: float = 5.0  # a new track can continue an agent's track that broke off this long ago (0: never)
-    continue_gate_m: float = 0.7  # ... if it starts this close to where the old track's motion leads
-    continue_spread_mps: float = 1.0  # ... a gate growing this fast with the gap (a chair turns, brakes)
-    continue_coast_s: float = 1.0  # the old track's velocity is extrapolated at most this long
-    continue_margin_m: float = 0.7  # ... and the hub expects no other agent within this much of as close
-    continue_clear_m: float = 0.6  # a new track this close to another live track may be a second detection: no
-    continue_height_m: float = 0.1  # ... nor one whose head height differs from the old track's by more (3 frame sd)
-    birth_sd_m: float = 0.3  # a chair with no track, placed this surely by the hub, names a new track there (0: no)
-    encounter_m: float = 1.3  # tracks this close may swap or merge: evidence from before they met is restarted
-    encounter_keep: float = 0.2  # ... except this share of the holder's own, so its identity holds until beaten
-    share_merges: bool = True  # an agent whose track ends inside a held one shares it until they part
-    share_m: float = 0.6  # ... inside: this close (a merged track sits at its people's centroid)
-    max_lag_s: float = 0.5  # the camera's clock offset is searched within this much of lag_prior_s (an absolute bound)
-    lag_prior_s: float = 0.0  # ... the configured offset (camera stamps minus venue time)
-    lag_every_s: float = 5.0
-    stature_weight: float = 4.0  # per bin, x how much worse the agent's motion matched tracks of this height (0: off)
-    seated_tilt_deg: float = 5.0  # ... except for an agent whose waist leans this far from walking upright (seated)
-    speed_sd_mps: float = 0.35
-    yaw_sd_dps: float = 25.0
-    course_sd_deg: float = 15.0  # a moving track's direction against a chair's dead-reckoned one (0: off)
-    course_min_mps: float = 0.5  # ... compared only while both move at least this fast
-    course_prior_bins: float = 10.0  # ... less the pair's usual angle, which starts at 0 with this weight in bins
-    course_forget_per_s: float = 0.8  # ... and forgets at this rate (half-life 3 s)
-    moving_sd: float = 0.7
-    position_sd_m: float = 0.5  # beyond the camera's own error, for where an agent is expected
-    walk_mps: float = 1.5  # how fast a pedestrian's expected position loses certainty when unseen
-    clip: float = 9.0  # one bin's normalised squared error never counts more than this (3 sigma)
-    position_clip: float = 4.0  # ... nor the hub's pose's (chairs): it can be wrong by metres, the motion cues not
+class IdentityEngine:
+    """`on_message(message)` -> outputs (TrackIdentity, PositionFix); `assignment()`: who holds which track.
 
-    def __post_init__(self) -> None:
-        checks = {"hop_s": (0.1, 10.0), "delay_s": (0.0, 10.0), "max_delay_s": (0.0, 10.0), "forget_per_s": (0.01, 1.0),
-                  "fast_forget_per_s": (0.0, 1.0), "fast_margin": (0.0, 100.0),
-                  "pedestrian_forget_per_s": (0.01, 1.0), "prior_bins": (0.0, 1e3),
-                  "nobody_cost": (0.0, 100.0), "claim_margin": (0.0, 100.0), "switch_margin": (0.0, 100.0),
-                  "fix_every_s": (0.0, 3600.0), "track_timeout_s": (0.0, 60.0), "max_lag_s": (0.0, 5.0),
-                  "continue_max_s": (0.0, 60.0), "continue_gate_m": (0.0, 100.0), "continue_spread_mps": (0.0, 100.0),
-                  "continue_coast_s": (0.0, 60.0), "continue_clear_m": (0.0, 100.0),
-                  "continue_margin_m": (0.0, 100.0), "birth_sd_m": (0.0, 100.0), "encounter_m": (0.0, 100.0),
-                  "encounter_keep": (0.0, 1.0), "share_m": (0.0, 100.0),
-                  "speed_sd_mps": (1e-3, 10.0), "yaw_sd_dps": (1e-3, 1e3), "moving_sd": (1e-3, 10.0),
-                  "position_sd_m": (1e-3, 100.0), "lag_prior_s": (-5.0, 5.0), "continue_height_m": (0.0, 10.0),
-                  "stature_weight": (0.0, 100.0), "seated_tilt_deg": (0.0, 90.0), "course_sd_deg": (0.0, 180.0),
-                  "course_min_mps": (0.0, 10.0), "course_prior_bins": (0.0, 1e4), "course_forget_per_s": (0.01, 1.0)}
-        for name, (low, high) in checks.items():
-            value = getattr(self, name)
-            if not low <= value <= high:
-                raise ValueError(f"IdentitySettings.{name} = {value}: must be within [{low}, {high}]")
-
-
-@dataclass
-class IdentityCounters:
-    updates: int = 0
-    pair_bins: int = 0  # cue comparisons: tracks x agents x bins, summed over updates
-    max_pair_bins: int = 0  # ... in the largest update
-    solves: int = 0  # assignment problems solved (one per hop, one more per examined new identity)
-    max_assignment_size: int = 0  # the largest padded matrix solved (a part's tracks + agents)
-    screened: int = 0  # new identities refused by the exchange bound, without a solve
-    identity_changes: int = 0
-    continuations: int = 0  # new tracks that inherited a broken-off track's identity at their first frame
-    births: int = 0  # ... of which where the hub placed a chair that had no track (its start, a sure pose)
-    encounters: int = 0  # tracks whose evidence restarted after they met others
-    shares: int = 0  # agents that shared a merged track (its holder's) after their own ended inside it
-    fixes: int = 0
-    frames: int = 0
-    tracks: int = 0
-    lag_bins: int = 0
-
-
-class IdentityEngine(TrackRules):
-    """`on_message(message)` -> outputs (TrackIdentity, PositionFix); `assignment()` now."""
+    `pose_of(agent_id, time_ns)`: the hub's (xy, sd) of an agent, or None. `clock`: a wall clock in seconds
+    (the caller's `time.perf_counter`) that times each hop into `update_s`; None: hops are not timed. The
+    engine reads no clock of its own, so its outputs depend on its inputs only."""
 
     def __init__(self, session: Session, settings: IdentitySettings = IdentitySettings(),
-                 pose_of: Callable[[str, int], tuple[np.ndarray, float] | None] | None = None):
+                 pose_of: Callable[[str, int], tuple[np.ndarray, float] | None] | None = None,
+                 clock: Callable[[], float] | None = None):
         self.settings = settings
+        self.clock = clock
         self.venue = session.venue.name
         self.pose_of = pose_of  # the hub's (xy, sd) of an agent at a venue time, when it has one
         self.clocks = ClockOffsets()
@@ -174,14 +89,16 @@ class IdentityEngine(TrackRules):
         self.seen_ns = np.zeros(count, dtype=np.int64)
         self.speed_model = SpeedModel()
         self.statures = StatureProfile(count)
-        self.tracks: dict[tuple[str, int], _Track] = {}
-        self.lost: dict[int, _Lost] = {}  # agent -> where its last track broke off (until it holds another)
+        self.tracks: dict[tuple[str, int], Track] = {}
+        self.lost: dict[int, Lost] = {}  # agent -> where its last track broke off (until it holds another)
         self.scored_until: dict[str, int] = {}  # camera -> first bin not yet scored
         self.next_lag_bin: dict[str, int] = {}
         self.lag_bins: dict[str, int] = {}
         self.counters = IdentityCounters()
         self.update_s: deque[float] = deque(maxlen=4096)  # wall time of the latest hops (reports, not control)
         self.delays_s: deque[float] = deque(maxlen=4096)  # ... and how far behind the camera each scored
+        self.rules = TrackRules(settings, self.agents, self.is_chair, self.start_xy, self.tracks, self.lost,
+                                self.counters, pose_of)
 
     # -- inputs ------------------------------------------------------------------------------
 
@@ -225,12 +142,12 @@ class IdentityEngine(TrackRules):
             key = (camera, int(track_id))
             track = self.tracks.get(key)
             if track is None:
-                track = self.tracks[key] = _Track(TrackCues(int(track_id)), np.zeros((2, len(self.agents))),
+                track = self.tracks[key] = Track(TrackCues(int(track_id)), np.zeros((2, len(self.agents))),
                                                   np.zeros((2, len(self.agents))), born_ns=time_ns)
                 self.counters.tracks += 1
                 new.append(key)
             track.cues.push(time_ns, float(x), float(y), float(height))
-        out = self._continue(camera, new, time_ns) if new else []
+        out = self.rules.continue_tracks(camera, new, time_ns) if new else []
         bin_now = time_ns // BIN_NS
         first = self.scored_until.setdefault(camera, bin_now)
         end = self._scored_end(bin_now)
@@ -238,9 +155,10 @@ class IdentityEngine(TrackRules):
             return out
         self.scored_until[camera] = end
         self.delays_s.append((bin_now - end) * BIN_S)
-        started = time.perf_counter()
+        started = self.clock() if self.clock is not None else None
         out += self._update(camera, first, end, frame.position_sd_m, time_ns)
-        self.update_s.append(time.perf_counter() - started)
+        if started is not None:
+            self.update_s.append(self.clock() - started)
         return out
 
     def _scored_end(self, bin_now: int) -> int:
@@ -260,9 +178,9 @@ class IdentityEngine(TrackRules):
         timeout = int(s.track_timeout_s * 1e9)
         gone = [k for k, t in self.tracks.items() if k[0] == camera and now_ns - t.cues.last_ns > timeout]
         keys = [k for k in self.tracks if k[0] == camera and k not in set(gone)]
-        shares = self._encounters(gone, keys, first, now_ns)
+        shares = self.rules.encounters(gone, keys, first, now_ns)
         out = [message for k in gone for message in self._drop(k, now_ns)]
-        out += self._share(camera, shares, now_ns)
+        out += self.rules.share(camera, shares, now_ns)
         if not keys or not self.agents:
             return out
         tracks = [self.tracks[k] for k in keys]
@@ -291,7 +209,7 @@ class IdentityEngine(TrackRules):
             self._search_lag(camera, tracks, end)
         return out
 
-    def _evidence(self, track: _Track) -> np.ndarray:
+    def _evidence(self, track: Track) -> np.ndarray:
         """Per agent: the slow mean of its bins' costs on this track (after the prior) or, where recent bins
         disagree with it, the fast one's: a holder whose recent bins are bad loses the track sooner, and
         an agent whose recent bins are good is not held back by bad ones from before (a merge, a crowd)."""
@@ -315,7 +233,7 @@ class IdentityEngine(TrackRules):
         return {"speed": speed, "yaw": yaw, "moving": moving, "tilt": b["tilt"],
                 "vx": np.where(chair[:, None], b["vx_dr"], np.nan), "vy": np.where(chair[:, None], b["vy_dr"], np.nan)}
 
-    def _bin_costs(self, tracks: list[_Track], agent: dict[str, np.ndarray], first: int, count: int,
+    def _bin_costs(self, tracks: list[Track], agent: dict[str, np.ndarray], first: int, count: int,
                    camera_sd_m: float) -> np.ndarray:
         s = self.settings
         cues = track_hop_cues([t.cues for t in tracks], first, count)
@@ -358,7 +276,7 @@ class IdentityEngine(TrackRules):
             stature = np.where(seated[None], risen, stature)
         return stature
 
-    def _course_cost(self, tracks: list[_Track], t_vx: np.ndarray, t_vy: np.ndarray, a_vx: np.ndarray,
+    def _course_cost(self, tracks: list[Track], t_vx: np.ndarray, t_vy: np.ndarray, a_vx: np.ndarray,
                      a_vy: np.ndarray, count: int) -> np.ndarray:
         """The angle between a track's velocity and an agent's dead-reckoned one, less the pair's usual angle,
         (tracks, agents, bins); NaN unless both move. A chair's heading mostly stays within a few degrees of
@@ -386,7 +304,7 @@ class IdentityEngine(TrackRules):
         residual = np.degrees((angle - usual[:, :, None] + np.pi) % (2 * np.pi) - np.pi)
         return np.where(moving, np.minimum((residual / s.course_sd_deg) ** 2, s.clip), np.nan)
 
-    def _position_cost(self, tracks: list[_Track], t_x: np.ndarray, t_y: np.ndarray, first: int, count: int,
+    def _position_cost(self, tracks: list[Track], t_x: np.ndarray, t_y: np.ndarray, first: int, count: int,
                        camera_sd_m: float) -> np.ndarray | None:
         """Where each agent is expected: a chair where the hub has it; an agent without a track where
         its last track ended, less certain as time passes. An agent's current track is not compared
@@ -413,7 +331,7 @@ class IdentityEngine(TrackRules):
         dy = t_y[:, None, :] - expected[None, :, :, 1]
         return np.minimum((dx * dx + dy * dy) / (2 * sd[None] ** 2), clip[None])
 
-    def _assign(self, camera: str, keys: list[tuple[str, int]], tracks: list[_Track], evidence: np.ndarray,
+    def _assign(self, camera: str, keys: list[tuple[str, int]], tracks: list[Track], evidence: np.ndarray,
                 now_ns: int) -> list[Any]:
         s = self.settings
         n_tracks, n_agents = evidence.shape
@@ -467,7 +385,7 @@ class IdentityEngine(TrackRules):
             track.agent = agent
             track.held_since_ns = now_ns
             self.lost.pop(agent, None)
-            self._unshare(agent)
+            self.rules.unshare(agent)
             self.counters.identity_changes += 1
             if agent >= 0:
                 out.append(self._identity(agent, camera, key[1], self._margin(evidence, row, agent), now_ns))
@@ -478,7 +396,7 @@ class IdentityEngine(TrackRules):
                                  [2 * self.settings.nobody_cost]])
         return float(max(others.min() - evidence[row, agent], 0.0))
 
-    def _fixes(self, camera: str, tracks: list[_Track], evidence: np.ndarray, now_ns: int,
+    def _fixes(self, camera: str, tracks: list[Track], evidence: np.ndarray, now_ns: int,
                camera_sd_m: float, scored_ns: int) -> list[Any]:
         """A fix is the track's position at the end of the bins its evidence has scored (`scored_ns`), not its
         newest: a tracker's swap in the last delay_s would otherwise send a fix from someone else."""
@@ -503,7 +421,7 @@ class IdentityEngine(TrackRules):
             self.counters.fixes += 1
         return out
 
-    def _learn_speed(self, tracks: list[_Track], evidence: np.ndarray, first: int, count: int) -> None:
+    def _learn_speed(self, tracks: list[Track], evidence: np.ndarray, first: int, count: int) -> None:
         """Refit the activity-to-speed line on pedestrians whose identity is clear (never on a doubtful pair)."""
         for row, track in enumerate(tracks):
             i = track.agent
@@ -513,7 +431,7 @@ class IdentityEngine(TrackRules):
                 continue
             self.speed_model.learn(self.agents[i].ring.window("activity", first, count), track.cues.speed(first, count))
 
-    def _search_lag(self, camera: str, tracks: list[_Track], end: int) -> None:
+    def _search_lag(self, camera: str, tracks: list[Track], end: int) -> None:
         """Shift the camera's bins against the agents' to where the identified pairs' turn rates agree best,
         within max_lag_s of the configured lag_prior_s (an absolute bound: successive moves never add up
         beyond it)."""
@@ -557,15 +475,14 @@ class IdentityEngine(TrackRules):
         """Forget a track the camera lost; its agent, if any, now has no track."""
         track = self.tracks.pop(key)
         if track.agent >= 0:
-            self.lost[track.agent] = _Lost.of(key[0], track)
+            self.lost[track.agent] = Lost.of(key[0], track)
         out = [self._identity(i, key[0], 0, 0.0, now_ns) for i in track.sharers]
         if track.agent >= 0:
             out.append(self._identity(track.agent, key[0], 0, 0.0, now_ns))
         return out
 
     def _identity(self, agent: int, camera: str, track_id: int, score: float, now_ns: int) -> Any:
-        return messages.new("TrackIdentity", timestamp_ns=int(now_ns), agent_id=self.agents[agent].agent_id,
-                            camera_id=camera, track_id=int(track_id), method=METHOD, score=float(score))
+        return identity_message(self.agents[agent].agent_id, camera, track_id, score, now_ns)
 
     def assignment(self) -> dict[str, tuple[str, int]]:
         """agent id -> (camera, track id) for every agent that has a track now."""

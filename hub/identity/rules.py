@@ -3,86 +3,51 @@
 A camera's tracker breaks tracks off and starts new ones, swaps the ids of people who meet and merges
 them into one track. Four rules follow these errors (docs/identity.md): a new track that starts where an
 agent's broken-off track was heading (and where the hub has it) continues that identity and its
-evidence in its first frame (`_continue`), and so does one where the hub surely places a chair
+evidence in its first frame (`continue_tracks`), and so does one where the hub surely places a chair
 that has no track, e.g. at the start of play (`_births`); tracks that meet may swap or merge, so the evidence
-of the chairs involved restarts from the meeting (`_encounters`); an agent whose track ends inside
-a held one shares it until they part (`_share`).
+of the chairs involved restarts from the meeting (`encounters`); an agent whose track ends inside
+a held one shares it until they part (`share`).
 
-Here: the engine's record of a camera track (`_Track`) and of where an agent's track broke off (`_Lost`),
-and `TrackRules`, the mixin holding those rules, which `IdentityEngine` inherits; they read and change
-the engine's tracks, lost tracks and counters.
+`TrackRules` is a part of the engine: it is given the engine's tracks, lost tracks and counters (the
+same objects, which both change in place) and returns the TrackIdentity messages its rules decide.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable
+from typing import Any, Callable
 
 import numpy as np
 
-from hub.identity.cues import BIN_NS, BIN_S, AgentCues, TrackCues
-
-if TYPE_CHECKING:
-    from hub.identity.engine import IdentityCounters, IdentitySettings
+from hub.identity.book import Lost, Track, identity_message
+from hub.identity.cues import BIN_NS, BIN_S, AgentCues
+from hub.identity.settings import IdentityCounters, IdentitySettings
 
 START_SD_M = 0.1  # a chair's edge starts its filter at the session's start position with this sd
 
 
-@dataclass
-class _Track:
-    cues: TrackCues
-    cost_sum: np.ndarray  # (2, agents): forgetting sums of bin costs, slow (forget_per_s) and fast (fast_forget_per_s)
-    cost_count: np.ndarray
-    agent: int = -1
-    held_since_ns: int = 0  # since when its identity is undisputed: held, and no encounter since
-    last_fix_ns: int = 0
-    encounter: set[int] = field(default_factory=set)  # agents this track may show since it met other tracks
-    close_bin: int = -(2**62)  # the last bin in which it was within encounter_m of another track
-    since_bin: np.ndarray | None = None  # per agent, the first bin that counts (bins before it showed someone else)
-    sharers: set[int] = field(default_factory=set)  # agents whose track merged into this one (it shows them too)
-    born_ns: int = 0
-    course: np.ndarray | None = None  # (cos, sin) x agents: forgetting sums of the angle track - agent direction
-
-
-@dataclass
-class _Lost:
-    """Where an agent's track broke off, and its evidence then: what a continuation inherits."""
-    camera: str
-    last_ns: int
-    xy: np.ndarray
-    velocity: np.ndarray  # m/s, NaN if the track was not moving fast enough to have one
-    cost_sum: np.ndarray
-    cost_count: np.ndarray
-    height_m: float = float("nan")  # the old track's reported head height (NaN: the tracker reports none)
-    course: np.ndarray | None = None
-
-    @classmethod
-    def of(cls, camera: str, track: _Track) -> _Lost:
-        last_bin = track.cues.last_ns // BIN_NS
-        velocity = np.array([track.cues.ring.window(name, last_bin, 1)[0] for name in ("vx", "vy")])
-        return cls(camera, track.cues.last_ns, track.cues.latest_xy.copy(), velocity, track.cost_sum.copy(),
-                   track.cost_count.copy(), track.cues.height(), None if track.course is None else track.course.copy())
-
-
 class TrackRules:
-    """Continuation, births, encounters and shares: the rules that follow a tracker's errors. A mixin of
-    IdentityEngine (hub/identity/engine.py), which sets the attributes below."""
+    """Continuation, births, encounters and shares: the rules that follow a tracker's errors, over the
+    engine's own records (`tracks`, `lost`, `counters`: shared with it, changed in place)."""
 
-    settings: IdentitySettings
-    pose_of: Callable[[str, int], tuple[np.ndarray, float] | None] | None  # the hub's (xy, sd) of an agent, if any
-    agents: list[AgentCues]
-    is_chair: np.ndarray
-    start_xy: dict[int, np.ndarray]
-    tracks: dict[tuple[str, int], _Track]
-    lost: dict[int, _Lost]
-    counters: IdentityCounters
+    def __init__(self, settings: IdentitySettings, agents: list[AgentCues], is_chair: np.ndarray,
+                 start_xy: dict[int, np.ndarray], tracks: dict[tuple[str, int], Track], lost: dict[int, Lost],
+                 counters: IdentityCounters,
+                 pose_of: Callable[[str, int], tuple[np.ndarray, float] | None] | None = None):
+        self.settings = settings
+        self.agents = agents
+        self.is_chair = is_chair
+        self.start_xy = start_xy  # where each chair's edge starts its filter, for births before its first pose
+        self.tracks = tracks
+        self.lost = lost
+        self.counters = counters
+        self.pose_of = pose_of  # the hub's (xy, sd) of an agent at a venue time, when it has one
 
-    if TYPE_CHECKING:
-        def _identity(self, agent: int, camera: str, track_id: int, score: float, now_ns: int) -> Any: ...
+    def _identity(self, agent: int, camera: str, track_id: int, score: float, now_ns: int) -> Any:
+        return identity_message(self.agents[agent].agent_id, camera, track_id, score, now_ns)
 
     # -- continuation: a track that breaks off and comes back under a new id ------------------
 
-    def _continue(self, camera: str, new: list[tuple[str, int]], now_ns: int) -> list[Any]:
+    def continue_tracks(self, camera: str, new: list[tuple[str, int]], now_ns: int) -> list[Any]:
         """A new track inherits an agent's identity (and evidence) in its first frame when it starts where
         that agent's broken-off track was heading and, for an agent the hub places, where the hub has it;
         only if it is the one new track there, that agent the one candidate, and no other live track is
@@ -91,7 +56,7 @@ class TrackRules:
         if s.continue_max_s <= 0:
             return []
         holders = {t.agent: k for k, t in self.tracks.items() if t.agent >= 0}
-        candidates: dict[int, _Lost] = {}
+        candidates: dict[int, Lost] = {}
         for i, lost in list(self.lost.items()):
             if now_ns - lost.last_ns > s.continue_max_s * 1e9:
                 del self.lost[i]
@@ -100,7 +65,7 @@ class TrackRules:
         for i, key in holders.items():
             track = self.tracks[key]
             if key[0] == camera and track.cues.last_ns < now_ns:  # held, but not in this frame: it broke off
-                candidates[i] = _Lost.of(camera, track)
+                candidates[i] = Lost.of(camera, track)
         out = self._end_shares(camera, new, now_ns)
         fresh = set(new)
         live = np.array([t.cues.latest_xy for k, t in self.tracks.items()
@@ -141,7 +106,7 @@ class TrackRules:
             track.course = None if lost.course is None else lost.course.copy()
             track.agent, track.held_since_ns = i, now_ns
             self.lost.pop(i, None)
-            self._unshare(i)
+            self.unshare(i)
             self.counters.continuations += 1
             self.counters.births += lost.camera == ""
             self.counters.identity_changes += 1
@@ -160,8 +125,8 @@ class TrackRules:
                 track.sharers.clear()
         return out
 
-    def _births(self, candidates: dict[int, _Lost], holders: dict[int, tuple[str, int]], live: np.ndarray,
-                now_ns: int) -> dict[int, _Lost]:
+    def _births(self, candidates: dict[int, Lost], holders: dict[int, tuple[str, int]], live: np.ndarray,
+                now_ns: int) -> dict[int, Lost]:
         """Chairs with no track and no broken-off one that the hub places surely (sd <= birth_sd_m; at the
         start of play every chair, from its known start): a new track where the hub has one continues it
         as if its track had broken off there, standing (the same rules then decide). Not while a live
@@ -184,10 +149,10 @@ class TrackRules:
             if len(live) and np.hypot(*(live - pose[0]).T).min() < s.continue_gate_m + 3.0 * pose[1]:
                 continue
             zeros = np.zeros((2, len(self.agents)))
-            out[i] = _Lost("", now_ns, np.asarray(pose[0], dtype=float), np.full(2, np.nan), zeros, zeros.copy())
+            out[i] = Lost("", now_ns, np.asarray(pose[0], dtype=float), np.full(2, np.nan), zeros, zeros.copy())
         return out
 
-    def _continues(self, i: int, lost: _Lost, xy: np.ndarray, now_ns: int) -> bool:
+    def _continues(self, i: int, lost: Lost, xy: np.ndarray, now_ns: int) -> bool:
         s = self.settings
         gap_s = max(now_ns - lost.last_ns, 0) * 1e-9
         velocity = np.where(np.isfinite(lost.velocity), lost.velocity, 0.0)
@@ -199,7 +164,7 @@ class TrackRules:
 
     # -- encounters and merges: tracks that meet may swap or merge ---------------------------
 
-    def _encounters(self, gone: list[tuple[str, int]], keys: list[tuple[str, int]], first: int,
+    def encounters(self, gone: list[tuple[str, int]], keys: list[tuple[str, int]], first: int,
                     now_ns: int) -> list[tuple[int, tuple[str, int]]]:
         """Tracks that came within encounter_m of each other since the last hop may have swapped or merged
         (a tracker errs only there): once the bins being scored are past their meeting, the evidence of
@@ -261,7 +226,7 @@ class TrackRules:
                 t.sharers.clear()
         return shares
 
-    def _share(self, camera: str, shares: list, now_ns: int) -> list[Any]:
+    def share(self, camera: str, shares: list, now_ns: int) -> list[Any]:
         """A merged track shows its holder and whoever's track ended inside it: those share it (many to
         one) until the merge ends; they get no fixes from it and stay free to claim tracks of their own."""
         out = []
@@ -275,22 +240,22 @@ class TrackRules:
                 continue
             if key not in self.tracks:
                 continue
-            self._unshare(i)
+            self.unshare(i)
             self.tracks[key].sharers.add(i)
             self.counters.shares += 1
             out.append(self._identity(i, camera, key[1], 0.0, now_ns))
         return out
 
-    def _unshare(self, agent: int) -> None:
+    def unshare(self, agent: int) -> None:
         for t in self.tracks.values():
             t.sharers.discard(agent)
 
-    def _join(self, track: _Track, agents: set[int], last_bin: int) -> None:
+    def _join(self, track: Track, agents: set[int], last_bin: int) -> None:
         """Agents that may now be on this track: their evidence on it restarts at once (what it showed before
         they met was someone else), the holder's at the end of the encounter. Only chairs: their dead-
         reckoned motion names them again within a second or two, while a pedestrian's weak cues need
-        many seconds, and pedestrians in a room meet all the time (restarting them: 48.5 -> 42.6 % live
-        in the paper's room)."""
+        many seconds, and pedestrians in a room meet all the time (restarting them too: 42.6 % live in the
+        paper's room against 48.5 %)."""
         agents = {i for i in agents if self.is_chair[i]}
         for i in agents - track.encounter - {track.agent}:
             track.cost_sum[:, i] = track.cost_count[:, i] = 0.0

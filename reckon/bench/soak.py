@@ -20,8 +20,9 @@ import numpy as np
 
 from protocol.errors import ReckonError
 from protocol.session_log import read_description
-from reckon.bench.pipeline import _Child, machine_info
-from reckon.bench.load import vm_kb
+from reckon.bench.children import Child, cli_command, vm_kb
+from reckon.bench.report import machine_info
+from reckon.transport.bus import free_endpoint
 from sim_devices.wheelchair import simulate
 
 PLAYERS = 2
@@ -34,8 +35,6 @@ PLOT = Path(__file__).resolve().parents[2] / "docs" / "img" / "soak-rss.png"
 def run_soak(out: Path, hours: float = 1.0, players: int = PLAYERS, seed: int = 1,
              progress: Callable[[str], None] = print, plot: Path | None = PLOT) -> dict[str, Any]:
     """Simulate, replay through edges and hub, sample RSS; the numbers (JSON-able) and the plot."""
-    from reckon.tools.demo import free_endpoint
-
     if not 0 < hours <= 24:
         raise ReckonError(f"bench soak: --hours {hours:g} must be in (0, 24]")
     out = Path(out)
@@ -50,11 +49,11 @@ def run_soak(out: Path, hours: float = 1.0, players: int = PLAYERS, seed: int = 
     simulate_s = time.monotonic() - began
     session = read_description(game)
     endpoint = free_endpoint()
-    hub = _Child("hub", ["hub", "--venue", str(game), "--listen", endpoint, "-o", str(out / "hub.mcap")],
-                 logs / "hub.log")
-    edges = {agent.id: _Child(f"edge {agent.id}", [
+    hub = Child("hub", cli_command("hub", "--venue", str(game), "--listen", endpoint, "-o", str(out / "hub.mcap")),
+                logs / "hub.log")
+    edges = {agent.id: Child(f"edge {agent.id}", cli_command(
         "edge", "--agent", agent.id, "--source", f"mcap://{game}", "--speed", "0", "--wait-for", "1",
-        "--connect", endpoint], logs / f"edge-{agent.id}.log") for agent in session.agents}
+        "--connect", endpoint), logs / f"edge-{agent.id}.log") for agent in session.agents}
     children = {"hub": hub, **{f"edge {agent_id}": edge for agent_id, edge in edges.items()}}
     curves: dict[str, list[float]] = {name: [] for name in children}
     times: list[float] = []

@@ -12,6 +12,7 @@ the hub's fixed-lag track, interpolated at the frames.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -55,7 +56,7 @@ def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubS
     """(hub, live, refined): per agent, arrays (time_ns, x, y) of the hub's two tracks.
 
     `identities`, if given, receives the hub's TrackIdentity messages in order."""
-    hub = VenueHub(session, settings)
+    hub = VenueHub(session, settings, clock=time.perf_counter)  # times the identity engine's hops
     edges = {agent.id: ChairEdge(agent, settings.pose_rate_hz) for agent in session.agents
              if agent.kind is AgentKind.WHEELCHAIR}
     tracks: dict[int, dict[str, list]] = {messages.Track.LIVE: {}, messages.Track.REFINED: {}}

@@ -14,6 +14,7 @@ sensor, so `turns_by_mounting` gives each mounting's own.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -31,6 +32,7 @@ from protocol.errors import InputError
 from protocol.session import AgentKind, Route, route_end_heading_rad
 from protocol.session_log import SessionData
 
+log = logging.getLogger(__name__)
 MATCH_S = 1.0
 # The paper's reported estimates (4 subjects, one length each; methods.md section 2), metres.
 PAPER_REPORTED_M = {
@@ -142,6 +144,8 @@ def evaluate_swim(data: SessionData, path: Path, progress: Callable[[str], None]
             _true_walls(report, rows, truth, pool, agent.route, common)
             tracker = SwimTracker(sensor, pool, agent.route)
             detected = tracker.push_rows(rows) + tracker.flush()
+            for _ in range(tracker.counters.overlong):  # the tracker counts the lengths it dropped; said here
+                log.warning("%s", tracker.overlong_warning())
             _score_detected(report, detected, truth, common)
     return report
 

@@ -30,8 +30,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-import zenoh
-
 from reckon.processes import checkpoint as hub_state
 from hub.chair.hub import HubSettings
 from hub.dedup import Deduplicator, Verdict
@@ -41,7 +39,7 @@ from protocol import keys
 from protocol.errors import ConfigError, InputError
 from protocol.session import Session
 from protocol.session_log import LogMessages, SessionWriter
-from reckon.transport.bus import Alive, PolledSubscription, Publisher, open_session
+from reckon.transport.bus import Alive, BusConfig, BusSession, PolledSubscription, Publisher, open_session
 
 log = logging.getLogger(__name__)
 POLL_S = 0.1
@@ -105,10 +103,10 @@ class SwimTotals:
         return f"{self.lengths} lengths, {self.swum_m:.1f} m in {self.seconds:.0f} s; last {self.latest or 'none'}"
 
 
-def run_hub(config: zenoh.Config, session: Session, stop: threading.Event, settings: HubSettings = HubSettings(),
+def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings: HubSettings = HubSettings(),
             output: Path | None = None, ready: threading.Event | None = None,
             on_output: Callable[[Any], None] | None = None, on_input: Callable[[Any], None] | None = None,
-            on_bus: Callable[[zenoh.Session], Any] | None = None, state: Path | None = None,
+            on_bus: Callable[[BusSession], Any] | None = None, state: Path | None = None,
             snapshot_every_s: float = SNAPSHOT_EVERY_S) -> HubSummary:
     """Run until `stop`; then take what was already received, flush the refined track, return.
 

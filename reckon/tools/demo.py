@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -23,14 +22,13 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
-import zenoh
 
 from protocol import bus as wire
 from protocol import keys, messages
 from protocol.errors import ReckonError
 from protocol.session import Session
 from protocol.session_log import LogMessages, read_description
-from reckon.transport.bus import open_session, wait_for_peers, zenoh_config
+from reckon.transport.bus import BusSession, DirectSubscription, free_endpoint, open_session, wait_for_peers, zenoh_config
 
 START_DELAY_S = 3.0  # time for the edge processes to start (Python, numpy, zenoh) before the first sample
 TABLE_EVERY_S = 2.0
@@ -91,17 +89,17 @@ def score(truth: dict[str, Track], estimates: dict[str, Track]) -> tuple[float, 
 class CourtView:
     """Latest live pose and corrections per agent, from the bus; a ring buffer that drops when behind."""
 
-    def __init__(self, bus: zenoh.Session, venue: str):
+    def __init__(self, bus: BusSession, venue: str):
         self.poses: dict[str, tuple[int, float, float]] = {}
         self.corrections: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
-        self.poses_sub = bus.declare_subscriber(keys.all_agents(venue, "pose/live"), zenoh.handlers.RingChannel(4096))
-        self.corrections_sub = bus.declare_subscriber(keys.all_agents(venue, "correction"),
-                                                      zenoh.handlers.FifoChannel(4096))
+        # Only the latest pose is shown, so missing some costs nothing; every correction is counted.
+        self.poses_sub = DirectSubscription.ring(bus, keys.all_agents(venue, "pose/live"), 4096)
+        self.corrections_sub = DirectSubscription.fifo(bus, keys.all_agents(venue, "correction"), 4096)
 
     def drain(self) -> None:
         for subscriber in (self.poses_sub, self.corrections_sub):
-            while (sample := subscriber.try_recv()) is not None:
-                message = wire.decode(str(sample.encoding), sample.payload.to_bytes(), str(sample.key_expr))
+            while (sample := subscriber.try_get()) is not None:
+                message = wire.decode(sample.encoding, sample.payload, sample.key)
                 if messages.type_name(message) == "EstimatedPose":
                     self.poses[message.agent_id] = (message.timestamp_ns, message.x_m, message.y_m)
                 else:
@@ -134,12 +132,6 @@ def table(session: Session, view: CourtView, truth: dict[str, Track], game_start
         kinds = ", ".join(f"{kind} {count}" for kind, count in sorted(view.corrections[agent.id].items())) or "none"
         lines.append(f"{agent.id:10} {pose[1]:7.2f} {pose[2]:7.2f} {error:>8}  {kinds}")
     return "\n".join(lines)
-
-
-def free_endpoint() -> str:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{probe.getsockname()[1]}"
 
 
 def run_live(game: Path, out: Path, speed: float, lag_s: float, show: Callable[[str], None]) -> LiveResult:

@@ -5,10 +5,11 @@ do. Checks, in order:
 
 - venue: the venue file loads (the loader's own message, with the key path), and its agents have
   the sensors their edges need;
-- sources: each `--source` the edge would take: `SENSOR=serial://PORT?...` (the port exists and
-  opens, then a short listen: do frames decode, at what rate), `SENSOR=ble://ADDRESS` and
-  `RECEIVER=ble://scan` (bleak importable, an adapter present), `SENSOR=phone://HOST:PORT` (the
-  port is free, the TLS certificate and the stand key are there), `mcap://FILE` (a readable log);
+- sources: each `--source` the edge would take, checked by its scheme's own `check`
+  (edge/sources/registry.py): `SENSOR=serial://PORT?...` (the port exists and opens, then a short
+  listen: do frames decode, at what rate), `SENSOR=ble://ADDRESS` and `RECEIVER=ble://scan` (bleak
+  importable, an adapter present), `SENSOR=phone://HOST:PORT` (the port is free, the TLS
+  certificate and the stand key are there), `mcap://FILE` (a readable log);
 - clock: this machine's kernel clock is synchronised (adjtimex);
 - bus: a Zenoh session opens with the given options, a hub of the venue answers, and in a short
   window: the offset of the hub's and the edges' clocks from this one (Zenoh timestamps of their
@@ -25,13 +26,9 @@ from __future__ import annotations
 import argparse
 import ctypes
 import ctypes.util
-import enum
-import errno
 import json
 import math
-import os
 import queue
-import socket
 import statistics
 import time
 from collections import Counter, defaultdict
@@ -40,26 +37,20 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
-import zenoh
-
+from edge.sources.registry import CheckRequest, Level, scheme
 from protocol import bus as wire
 from protocol import keys
 from protocol.errors import ReckonError
 from protocol.session import AgentKind, Mount, Session
+from reckon.transport.config import BusConfig
 
 CLOCK_WARN_MS = 50.0  # a tenth of the hub's 0.5 s collision pairing window
 CLOCK_FAIL_MS = 500.0  # the whole pairing window: two chairs' impacts can no longer be paired
 HUB_STREAMS = ("pose", "correction", "identity")  # what the hub publishes under an agent's key
 EDGE_POSE = "pose/edge"  # the one pose stream an edge publishes
-SERIAL_FRAMES = 100  # inertial frames that are plenty to tell the protocol and the rate
 BLUETOOTH_SYSFS = Path("/sys/class/bluetooth")
 LOW_BATTERY_PCT = 20.0
-
-
-class Level(str, enum.Enum):
-    OK = "OK"
-    WARN = "WARN"
-    FAIL = "FAIL"
+__all__ = ["Check", "DoctorSettings", "Level", "Report", "run_doctor"]  # Level: the sources' own (registry)
 
 
 @dataclass(frozen=True)
@@ -84,7 +75,7 @@ class DoctorSettings:
     venue: Path | None = None
     agent: str | None = None
     sources: tuple[str, ...] = ()
-    bus: zenoh.Config | None = None
+    bus: BusConfig | None = None
     listen_s: float = 1.0
     bus_timeout_s: float = 3.0
     streams_s: float = 2.0
@@ -133,7 +124,7 @@ def run_doctor(settings: DoctorSettings) -> Report:
 
 
 def check_venue(report: Report, settings: DoctorSettings) -> Session | None:
-    from reckon.processes.edge import session_description
+    from protocol.session_log import session_description  # light: a hub has no edge filters
 
     if settings.venue is None:
         report.add("venue", Level.WARN, "no venue file given; sensors and the bus cannot be checked against it",
@@ -168,28 +159,29 @@ def check_venue(report: Report, settings: DoctorSettings) -> Session | None:
 
 
 def check_sources(report: Report, settings: DoctorSettings, session: Session | None) -> None:
-    for url in settings.sources:
-        sensor_id, sep, device = url.partition("=")
-        if not sep:
-            sensor_id, device = "", url
-        name = f"source {url}"
-        scheme = urlsplit(device).scheme
-        receiver = device == "ble://scan"  # a scan's id names the receiver, not a sensor of the venue file
-        if scheme != "mcap" and not receiver and session is not None and not _known_sensor(
+    """Each --source by its scheme's `check`; a sensor id the venue does not know fails first."""
+    for given in settings.sources:
+        sensor_id, sep, url = given.partition("=")
+        if not sep or urlsplit(given).scheme == "mcap":
+            sensor_id, url = "", given
+        name = f"source {given}"
+        try:
+            found = scheme(urlsplit(url).scheme)
+            problem = ""
+        except ReckonError as error:  # unknown, or its library missing: the registry's words
+            found, problem = None, str(error)
+        if (found is None or found.sensor(url)) and session is not None and not _known_sensor(
                 report, name, sensor_id, session, settings):
             continue
+        if found is None:
+            report.add(name, Level.FAIL, problem, "use SENSOR=serial://PORT, SENSOR=ble://ADDRESS, "
+                       "SENSOR=phone://HOST:PORT or mcap://FILE")
+            continue
+        request = CheckRequest(url, sensor_id, session, settings.venue, settings.agent, _rate_hz(session, sensor_id),
+                               settings.listen_s, settings.bluetooth_sysfs)
         try:
-            if scheme == "serial":
-                check_serial(report, name, device, _rate_hz(session, sensor_id), settings.listen_s)
-            elif scheme == "ble":
-                check_ble(report, name, device, session, settings.bluetooth_sysfs)
-            elif scheme == "phone":
-                check_phone(report, name, device, session, settings.venue)
-            elif scheme == "mcap":
-                check_mcap(report, name, device, settings.agent)
-            else:
-                report.add(name, Level.FAIL, f"scheme {scheme or 'none'!r} is not serial, ble, phone or mcap",
-                           "use SENSOR=serial://PORT, SENSOR=ble://ADDRESS, SENSOR=phone://HOST:PORT or mcap://FILE")
+            for finding in found.check(request):
+                report.add(name, finding.level, finding.message, finding.fix)
         except ReckonError as error:  # a malformed URL: the parser's own words
             report.add(name, Level.FAIL, str(error), "fix the URL (reckon edge --help)")
 
@@ -208,142 +200,6 @@ def _known_sensor(report: Report, name: str, sensor_id: str, session: Session, s
 def _rate_hz(session: Session | None, sensor_id: str) -> float | None:
     owner = session.sensor_owner().get(sensor_id) if session else None
     return next((s.rate_hz for s in owner.sensors if s.id == sensor_id), None) if owner else None
-
-
-def check_serial(report: Report, name: str, url: str, rate_hz: float | None, listen_s: float) -> None:
-    """Port exists and opens; then listen up to `listen_s` for frames of the URL's protocol."""
-    from edge.decoders import InertialFrame
-    from edge.sources.serial import DeviceError, SerialSource, parse_serial_url
-
-    port, _, _ = parse_serial_url(url)
-    if port.startswith("/") and not os.path.exists(port):
-        report.add(name, Level.FAIL, f"{port} does not exist",
-                   "plug the device in and power it; `ls /dev/serial/by-id/` lists the serial devices present")
-        return
-    if port.startswith("/") and not os.access(port, os.R_OK | os.W_OK):
-        report.add(name, Level.FAIL, f"no permission to open {port}",
-                   "add the user to the dialout group (`sudo usermod -aG dialout $USER`, then log in again)")
-        return
-    source = SerialSource.from_url(url)
-    try:
-        source.open()
-    except DeviceError as error:
-        report.add(name, Level.FAIL, str(error), "is another program (an edge) using the port?")
-        return
-    frames: list[Any] = []
-    deadline = time.monotonic() + listen_s
-    try:
-        with source:
-            while time.monotonic() < deadline and sum(isinstance(f, InertialFrame) for f in frames) < SERIAL_FRAMES:
-                frames += source.read_frames()
-    except DeviceError as error:
-        report.add(name, Level.FAIL, f"opened, then lost: {error}", "check the cable or the Bluetooth link")
-        return
-    inertial = [f for f in frames if isinstance(f, InertialFrame)]
-    rejected = sum(getattr(f, "reason", None) is not None for f in frames)
-    if source.bytes_read == 0:
-        report.add(name, Level.WARN, f"{port} opens, but sent nothing in {listen_s:g} s",
-                   "is the device on and streaming? an x-IMU3 streams on its own; a TSND needs ?protocol=tsnd")
-    elif not inertial:
-        report.add(name, Level.FAIL, f"{source.bytes_read} bytes in {listen_s:g} s, no valid frame ({rejected} "
-                   "rejected)", "wrong protocol or baud rate in the URL (?protocol=, ?baud=)")
-    else:
-        span_s = (inertial[-1].timestamp_us - inertial[0].timestamp_us) * 1e-6
-        measured = (len(inertial) - 1) / span_s if len(inertial) > 1 and span_s > 0 else None
-        text = (f"{len(inertial)} inertial frames decoded from {source.bytes_read} bytes ({rejected} rejected)"
-                + (f", {measured:.0f} Hz by the device clock" if measured else ""))
-        if measured and rate_hz and abs(measured - rate_hz) > 0.1 * rate_hz:
-            report.add(name, Level.WARN, f"{text}; the venue file says rate_hz {rate_hz:g}",
-                       "set the device's rate, or rate_hz in the venue file, so that they agree")
-        else:
-            report.add(name, Level.OK, text)
-
-
-def check_ble(report: Report, name: str, url: str, session: Session | None, sysfs: Path) -> None:
-    import importlib.util
-
-    from edge.sources.ble import SCAN, parse_ble_url
-
-    address = parse_ble_url(url)
-    if importlib.util.find_spec("bleak") is None:
-        report.add(name, Level.FAIL, "bleak (the BLE library) is not installed", "pip install bleak into the venv")
-        return
-    adapters = sorted(p.name for p in sysfs.glob("hci*")) if sysfs.is_dir() else []
-    if not adapters:
-        report.add(name, Level.WARN, f"no Bluetooth adapter listed in {sysfs}",
-                   "plug in a Bluetooth dongle or enable Bluetooth (`bluetoothctl list`); not checked off Linux")
-        return
-    if address == SCAN and session is not None and not any(b.identity for b in session.venue.beacons):
-        report.add(name, Level.FAIL, "no beacon in the venue file has an identity to listen for",
-                   "set identity in each [[venue.beacons]] table")
-        return
-    report.add(name, Level.OK, f"bleak importable, adapter {', '.join(adapters)} (device not contacted)")
-
-
-def check_phone(report: Report, name: str, url: str, session: Session | None, venue: Path | None) -> None:
-    from edge.sources.phone.server import parse_phone_url
-
-    host, port, options = parse_phone_url(url)
-    try:
-        with socket.create_server((host, port)):
-            pass
-    except OSError as error:
-        why = {errno.EADDRINUSE: f"port {port} is in use (another edge or server?)",
-               errno.EACCES: f"no permission to listen on port {port} (below 1024)",
-               errno.EADDRNOTAVAIL: f"{host} is not an address of this machine"}.get(error.errno, str(error))
-        report.add(name, Level.FAIL, why, "choose another HOST:PORT, or stop what uses it")
-        return
-    folder = venue.parent if venue else Path.cwd()
-    tls_dir = Path(options.get("tls_dir") or folder / "phone-tls")
-    cert = tls_dir / "cert.pem"
-    if not cert.exists():
-        report.add(name, Level.WARN, f"port {port} free; no certificate yet in {tls_dir}",
-                   "the edge makes one at its first start; each phone then trusts /ca.pem once (docs/phone.md)")
-    else:
-        days = _days_left(cert)
-        level = Level.OK if days > 30 else Level.WARN
-        report.add(name, level, f"port {port} free; certificate {cert} valid {days:.0f} more days",
-                   "" if level is Level.OK else "the edge issues a new one at its next start")
-    key_file = Path(options.get("key_file") or folder / f"{session.venue.name}.standkey") if session else None
-    if session is not None and session.venue.stands and key_file is not None and not key_file.exists():
-        report.add(name, Level.FAIL, f"the venue has QR stands but no stand key at {key_file}",
-                   "`reckon qr make VENUE.toml -o DIR` creates it, or give ?key_file=")
-
-
-def _days_left(cert: Path) -> float:
-    import datetime
-
-    from cryptography import x509
-
-    ends = x509.load_pem_x509_certificate(cert.read_bytes()).not_valid_after_utc
-    return (ends - datetime.datetime.now(datetime.UTC)).total_seconds() / 86400.0
-
-
-def check_mcap(report: Report, name: str, url: str, agent: str | None) -> None:
-    from mcap.reader import make_reader
-
-    from protocol.session_log import read_description
-
-    parts = urlsplit(url)
-    path = Path(parts.netloc + parts.path)
-    try:
-        session = read_description(path)
-        with path.open("rb") as stream:
-            summary = make_reader(stream).get_summary()
-    except ReckonError as error:  # names the file already
-        report.add(name, Level.FAIL, str(error), "give a log written by reckon (sim, import, record or a hub's -o)")
-        return
-    except (OSError, ValueError) as error:  # the mcap reader's own errors on a damaged file
-        report.add(name, Level.FAIL, f"{path}: not a readable session log ({error})",
-                   "give a log written by reckon (sim, import, record or a hub's -o)")
-        return
-    count = summary.statistics.message_count if summary and summary.statistics else 0
-    agents = {c.topic.split("/")[2] for c in summary.channels.values() if c.topic.count("/") >= 3} if summary else set()
-    if agent is not None and agent not in agents:
-        report.add(name, Level.FAIL, f"{path} has no messages of agent {agent!r} (has {', '.join(sorted(agents))})",
-                   "use one of those agents or another log")
-        return
-    report.add(name, Level.OK, f"{path}: venue {session.venue.name!r}, {count} messages, {len(agents)} agents")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -406,7 +262,7 @@ class _Traffic:
     status: dict[str, Any] = field(default_factory=dict)  # agent/sensor -> latest DeviceStatus
 
 
-def check_bus(report: Report, config: zenoh.Config, settings: DoctorSettings, session: Session) -> None:
+def check_bus(report: Report, config: BusConfig, settings: DoctorSettings, session: Session) -> None:
     from reckon.transport.bus import BusError, Subscription, flush, open_session, wait_for_peers
 
     venue = session.venue.name
@@ -436,7 +292,7 @@ def check_bus(report: Report, config: zenoh.Config, settings: DoctorSettings, se
         report.add("bus", Level.FAIL, str(error), "check the endpoints; a listen port may be in use")
 
 
-def _setting(config: zenoh.Config, path: str) -> str:
+def _setting(config: BusConfig, path: str) -> str:
     """A config value as a person reads it: a list of endpoints space-separated ("none" if empty);
     anything else (a file's per-mode table) as JSON."""
     value = json.loads(config.get_json(path))
@@ -526,7 +382,7 @@ def finite_seconds(text: str) -> float:
 
 def register(subparsers: Any, bus_options: Any, bus_config: Any) -> None:
     """Add `reckon doctor` to the CLI. `bus_options(parser)` adds --listen/--connect/--mode;
-    `bus_config(args, default_role)` turns them into a Zenoh config (both from reckon/cli.py)."""
+    `bus_config(args, default_role)` turns them into a Zenoh config (both from reckon/cli/bus.py)."""
     doctor = subparsers.add_parser("doctor", help="check the venue file, devices, clocks and the bus; say what is "
                                                   "wrong (docs/doctor.md)")
     doctor.add_argument("--venue", metavar="VENUE.toml", help="the venue file (or a session log)")

@@ -8,15 +8,18 @@ documented: decoders never raise on stream content). An intact frame counts as r
 the decoded frames hold it, with its values, in order (a subsequence match): "every intact
 frame after the garbage recovered".
 
-Decoders: `tsnd` (TsndDecoder, 0x80/0x81 frames from sim_devices/devices/tsnd_encoder.py), `ximu3`
-(Ximu3Decoder, binary and ASCII I/M messages from sim_devices/devices/ximu3_encoder.py), `ble`
-(ThingyMotionDecoder notifications, and the iBeacon/Eddystone advertisement parsers fed random
-manufacturer and service data). Engines: `random` (seeded, numpy) and, where the optional
+Decoders: every byte-stream decoder that declares a fuzz hook (`DEVICE` in its module,
+edge/decoders/devices.py): `tsnd` (TsndDecoder, 0x80/0x81 frames from
+sim_devices/devices/tsnd_encoder.py), `ximu3` (Ximu3Decoder, binary and ASCII I/M messages from
+sim_devices/devices/ximu3_encoder.py); and `ble` (ThingyMotionDecoder notifications, datagrams
+rather than a stream, and the iBeacon/Eddystone advertisement parsers fed random manufacturer and
+service data). Engines: `random` (seeded, numpy) and, where the optional
 `atheris` package installs, `atheris` (libFuzzer's coverage-guided mutations of whole streams).
 """
 
 from __future__ import annotations
 
+import importlib
 import sys
 import time
 import traceback
@@ -27,16 +30,16 @@ import numpy as np
 
 from edge.decoders.ble_adverts import (APPLE_COMPANY_ID, EDDYSTONE_SERVICE_UUID, THINGY_RAW_MOTION, ThingyMotionDecoder,
                                        parse_eddystone_uid, parse_ibeacon)
-from edge.decoders.tsnd import TsndDecoder
-from edge.decoders.ximu3 import InertialFrame, MagnetometerFrame, Ximu3Decoder
+from edge.decoders.devices import DeviceDecoder, device_decoders
+from edge.decoders.ximu3 import InertialFrame, MagnetometerFrame
 from protocol.errors import ConfigError
-from sim_devices.devices import tsnd_encoder
-from sim_devices.devices import ximu3_encoder
 
-DECODERS = ("tsnd", "ximu3", "ble")
+# The byte-stream decoders with a fuzz hook, then the BLE datagrams
+STREAMS: dict[str, DeviceDecoder] = {name: device for name, device in device_decoders().items()
+                                     if device.new_decoder is not None and device.fuzz_frames}
+DECODERS = (*STREAMS, "ble")
 MUTATION_SHARE = 0.5  # of the units, the rest are intact frames
 MAX_CHUNK_BYTES = 4096
-SYNC_BYTES = {"tsnd": b"\x9a\x80\x81", "ximu3": b"\n\xc9\xcdIM,\r\xdb"}
 UNITS_PER_BLOCK = 20_000  # frames encoded at once (vectorised), then mutated and fed
 
 
@@ -93,36 +96,31 @@ def _mutate(rng: np.random.Generator, frame: bytes, sync: bytes, counts: dict[st
     return bytes(data)
 
 
-def _tsnd_frames(rng: np.random.Generator, start_ms: int, count: int) -> list[bytes]:
-    """`count` 0x80 frames (1 ms apart, a 0x81 every 10th) with random in-range values."""
-    time_ns = (start_ms + np.arange(count, dtype=np.int64)) * 1_000_000
-    accel, gyro = rng.uniform(-15.9, 15.9, (count, 3)), rng.uniform(-1990, 1990, (count, 3))
-    mag = rng.uniform(-0.6, 0.6, (count, 3))
-    return [frame for _, frame in tsnd_encoder.encode_samples(time_ns, accel, gyro, mag, mag_every=10)]
+def _frame_maker(device: DeviceDecoder) -> Callable[[np.random.Generator, int, int], list[bytes]]:
+    """The simulated device's encoder hook the decoder names ("module:function")."""
+    module, _, function = device.fuzz_frames.partition(":")
+    maker: Callable[[np.random.Generator, int, int], list[bytes]] = getattr(importlib.import_module(module), function)
+    return maker
 
 
-def _ximu3_frames(rng: np.random.Generator, start_ms: int, count: int) -> list[bytes]:
-    """`count` I messages 1 ms apart (an M every 10th), binary or ASCII as the block draws."""
-    time_ns = (start_ms + np.arange(count, dtype=np.int64)) * 1_000_000
-    gyro, accel = rng.uniform(-1990, 1990, (count, 3)), rng.uniform(-15.9, 15.9, (count, 3))
-    mag = rng.uniform(-0.6, 0.6, (count, 3))
-    ascii = bool(rng.integers(0, 2))
-    return [frame for _, frame in ximu3_encoder.encode_samples(time_ns, gyro, accel, mag, ascii=ascii, mag_every=10)]
+def _fresh(name: str) -> Any:
+    """A new decoder of stream `name` (STREAMS holds only devices that have one)."""
+    new_decoder: Callable[[], Any] = STREAMS[name].new_decoder  # type: ignore[assignment]
+    return new_decoder()
 
 
-def _expected(decoder_name: str, frame: bytes) -> tuple | None:
+def _expected(name: str, frame: bytes) -> tuple | None:
     """The key of an intact frame, decoded alone by a fresh decoder."""
-    fresh = TsndDecoder() if decoder_name == "tsnd" else Ximu3Decoder()
-    frames = fresh.feed(frame)
+    frames = _fresh(name).feed(frame)
     return _key(frames[0]) if frames else None
 
 
 def _stream_decoder(name: str, frames: int, seed: int) -> FuzzResult:
     rng = np.random.default_rng(seed)
     result = FuzzResult(name)
-    decoder: Any = TsndDecoder() if name == "tsnd" else Ximu3Decoder()
-    make = _tsnd_frames if name == "tsnd" else _ximu3_frames
-    sync = SYNC_BYTES[name]
+    decoder = _fresh(name)
+    make = _frame_maker(STREAMS[name])
+    sync = STREAMS[name].sync_bytes
     start_ms, begun = 3_600_000, time.perf_counter()
     while result.frames < frames:
         count = min(UNITS_PER_BLOCK, frames - result.frames)
@@ -253,7 +251,7 @@ def run_atheris(decoder: str, frames: int) -> int:
                 parse_ibeacon({APPLE_COMPANY_ID: data})
                 parse_eddystone_uid({EDDYSTONE_SERVICE_UUID: data})
                 continue
-            stream: Any = TsndDecoder() if name == "tsnd" else Ximu3Decoder()
+            stream = _fresh(name)
             stream.feed(data[:cut])
             stream.feed(data[cut:])
             stream.reset()

@@ -1,6 +1,7 @@
-"""Calibration stands' QR codes: printable PNG and SVG per stand, reading codes back from images,
-and `reckon qr make|read` (docs/qr-stands.md). The code's text and its integrity check live in
-protocol/stand_code.py; this module only draws and reads pictures of it.
+"""Calibration stands' QR codes: printable PNG and SVG per stand and reading codes back from
+images, the work behind `reckon qr make|read` (its parser is reckon/cli/qr.py; docs/qr-stands.md).
+The code's text and its integrity check live in protocol/stand_code.py and the key file in
+edge/sources/phone/stand_key.py; this module only draws and reads pictures of it.
 
 Print geometry: 1 mm per QR module (a typical stand's code, version 5, is 37 modules plus a
 4-module quiet zone each side: 45 mm). Phone cameras read a 1 mm module comfortably from 10 cm to
@@ -25,7 +26,8 @@ from PIL import Image, ImageDraw, ImageFont, UnidentifiedImageError
 
 from protocol.errors import ConfigError, InputError
 from protocol.session import Session, Stand, load_toml
-from protocol.stand_code import StandCodeError, decode, encode, load_key, new_key, write_key
+from protocol.stand_code import StandCodeError, decode, encode, new_key
+from edge.sources.phone.stand_key import key_path, load_key, write_key
 
 ERROR_LEVEL = "q"
 QUIET_ZONE_MODULES = 4  # the QR standard's minimum; less and scanners miss the finder patterns
@@ -35,8 +37,6 @@ PNG_DPI = PNG_MODULE_PX * 25.4 / MODULE_MM  # 304.8 dpi: the PNG prints at exact
 CAPTION_PX = 36  # 3 mm at 304.8 dpi: readable at arm's length
 CAPTION_MM = 3.0
 MONOSPACE_WIDTH_EM = 0.6  # advance of one monospace character, to size the SVG without rendering it
-DEFAULT_OUTPUT = "out/qr"
-KEY_SUFFIX = ".standkey"
 
 
 def _caption(venue: str, stand: Stand) -> list[str]:
@@ -142,7 +142,7 @@ def decode_image(image: Path | str | np.ndarray) -> list[str]:
 
 
 def _key_path(args: argparse.Namespace, session: Session) -> Path:
-    return Path(args.key_file) if args.key_file else Path(args.venue).parent / f"{session.venue.name}{KEY_SUFFIX}"
+    return key_path(Path(args.venue).parent, session.venue.name, args.key_file)
 
 
 def _describe(stand: Stand) -> str:
@@ -194,22 +194,3 @@ def run_read(args: argparse.Namespace, progress: Callable[[str], None] | None = 
                 print(f"{image}: refused: {error.reason}")
                 status = 1
     return status
-
-
-def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    """Add `reckon qr make|read` to the CLI's sub-command parsers."""
-    qr = subparsers.add_parser("qr", help="calibration stands' QR codes: print them, check photos of them "
-                                          "(docs/qr-stands.md)")
-    commands = qr.add_subparsers(dest="qr_command", required=True)
-    key_help = (f"the venue's stand key (default: <venue file folder>/<venue name>{KEY_SUFFIX}; "
-                "`make` creates it on first use)")
-    make = commands.add_parser("make", help="a printable PNG and SVG for every stand of the venue")
-    make.add_argument("venue", metavar="VENUE.toml", help="the venue file, with [[venue.stands]]")
-    make.add_argument("-o", "--output", default=DEFAULT_OUTPUT, metavar="DIR", help=f"default {DEFAULT_OUTPUT}")
-    make.add_argument("--key-file", metavar="F", help=key_help)
-    make.set_defaults(run=run_make)
-    read = commands.add_parser("read", help="decode stand codes in images and check them against the venue")
-    read.add_argument("images", nargs="+", metavar="IMAGE", help="PNG, JPEG, ... (a photo or a made code)")
-    read.add_argument("--venue", required=True, metavar="VENUE.toml")
-    read.add_argument("--key-file", metavar="F", help=key_help)
-    read.set_defaults(run=run_read)

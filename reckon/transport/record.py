@@ -26,14 +26,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import zenoh
-
 from protocol import bus as wire
 from protocol.errors import ConfigError, InputError
 from protocol.keys import ROOT, check_id
 from protocol.session import Session
 from protocol.session_log import SessionWriter
-from reckon.transport.bus import Alive, Subscription, open_session
+from reckon.transport.bus import Alive, BusConfig, BusSession, Subscription, open_session, query
 
 log = logging.getLogger(__name__)
 DESCRIPTION_RETRY_S = 0.5  # how often to ask for the session description while none has come
@@ -64,7 +62,7 @@ class RecordSummary:
         return "\n".join(lines)
 
 
-def record(config: zenoh.Config, venue: str, output: Path | str, stop: threading.Event,
+def record(config: BusConfig, venue: str, output: Path | str, stop: threading.Event,
            ready: threading.Event | None = None, *, description: Session | None = None,
            until_end: bool = False, process_id: str | None = None,
            progress: Callable[[int], None] | None = None) -> RecordSummary:
@@ -162,15 +160,14 @@ def _skip_reason(encoding: str) -> str:
     return f"unreadable {encoding.partition(';')[2]} payload"
 
 
-def _await_description(session: zenoh.Session, venue: str, stop: threading.Event) -> Session | None:
+def _await_description(session: BusSession, venue: str, stop: threading.Event) -> Session | None:
     """The session description from the bus (PUT or query answer); None if `stop` comes first."""
     key = wire.session_key(venue)
     log.info("waiting for the session description on %s", key)
     with Subscription(session, key, capacity=16, fifo_capacity=16) as announcements:
         while not stop.is_set():
-            for reply in session.get(key, timeout=DESCRIPTION_RETRY_S):
-                if reply.ok is not None:
-                    return wire.decode_session(reply.ok.payload.to_bytes(), where=f"{key} (query reply)")
+            for reply in query(session, key, DESCRIPTION_RETRY_S):
+                return wire.decode_session(reply.payload, where=f"{key} (query reply)")
             try:
                 item = announcements.get(timeout=DESCRIPTION_RETRY_S)
             except queue.Empty:

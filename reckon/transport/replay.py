@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import zenoh
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
@@ -36,7 +35,7 @@ from protocol import messages
 from protocol.errors import ConfigError, InputError
 from protocol.keys import ROOT
 from protocol.session_log import description_from_records, iter_records
-from reckon.transport.bus import Publisher, flush, open_session, wait_for_peers
+from reckon.transport.bus import Answer, BusConfig, Publisher, flush, open_session, wait_for_peers
 
 log = logging.getLogger(__name__)
 PROGRESS_EVERY = 1000  # messages between progress reports
@@ -90,7 +89,7 @@ class ReplaySummary:
         return "\n".join(lines)
 
 
-def replay(session_path: Path | str, config: zenoh.Config, speed: float = 1.0,
+def replay(session_path: Path | str, config: BusConfig, speed: float = 1.0,
            progress: Callable[[ReplayProgress], None] | None = None, *, wait_for: int = 0,
            wait_timeout_s: float | None = 60.0, stop: threading.Event | None = None) -> ReplaySummary:
     """Publish every message of a session log on its key; see the module docstring for the sequence.
@@ -114,17 +113,11 @@ def replay(session_path: Path | str, config: zenoh.Config, speed: float = 1.0,
     venue = description.venue.name
     description_payload = wire.encode_session(description)
     consumers: list[str] = []
-    with open_session(config) as session:
+    with open_session(config) as session, Publisher(session) as publisher:
         key = wire.session_key(venue)
-
-        def answer(query: zenoh.Query) -> None:  # late joiners ask for the description
-            with query:
-                query.reply(key, description_payload, encoding=zenoh.Encoding(wire.SESSION_ENCODING))
-
-        queryable = session.declare_queryable(key, answer)
-        try:
-            session.put(key, description_payload, encoding=zenoh.Encoding(wire.SESSION_ENCODING),
-                        congestion_control=zenoh.CongestionControl.BLOCK)
+        # late joiners ask for the description
+        with Answer(session, key, description_payload, wire.SESSION_ENCODING):
+            publisher.publish_bytes(key, description_payload, wire.SESSION_ENCODING)
             started = time.monotonic()
             if wait_for:
                 report(ReplayProgress("waiting", 0, total))
@@ -132,19 +125,16 @@ def replay(session_path: Path | str, config: zenoh.Config, speed: float = 1.0,
                                                      wire.alive_selector(venue, wire.Role.RECORDER)],
                                            wait_for, wait_timeout_s)
             waited_s = time.monotonic() - started
-            with Publisher(session) as publisher:
-                stats = _publish(records, publisher, venue, speed, stop, total, report)
-                flushing = time.monotonic()
-                # Barrier before the end marker: every live process answers, and each answer means
-                # it has every message. After the marker a recorder may leave at once, so the second
-                # barrier's answers are not counted; its round trip (answered, or "no such
-                # queryable") only makes sure the marker itself is out before the session closes.
-                confirmed = flush(session, wire.alive_selector(venue), FLUSH_TIMEOUT_S)
-                confirm_s = time.monotonic() - flushing
-                session.delete(key, congestion_control=zenoh.CongestionControl.BLOCK)
-                flush(session, wire.alive_selector(venue), FLUSH_TIMEOUT_S)
-        finally:
-            queryable.undeclare()
+            stats = _publish(records, publisher, venue, speed, stop, total, report)
+            flushing = time.monotonic()
+            # Barrier before the end marker: every live process answers, and each answer means
+            # it has every message. After the marker a recorder may leave at once, so the second
+            # barrier's answers are not counted; its round trip (answered, or "no such
+            # queryable") only makes sure the marker itself is out before the session closes.
+            confirmed = flush(session, wire.alive_selector(venue), FLUSH_TIMEOUT_S)
+            confirm_s = time.monotonic() - flushing
+            publisher.delete(key)
+            flush(session, wire.alive_selector(venue), FLUSH_TIMEOUT_S)
     if stats.other_venue:
         problems.append(f"{stats.other_venue} messages were on keys outside reckon/{venue}/ (the description's "
                         "venue): a recorder of that venue does not see them")

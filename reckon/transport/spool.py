@@ -37,11 +37,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import zenoh
-
 from protocol import bus as wire
 from protocol.errors import ConfigError, ReckonError
-from reckon.transport.bus import Publisher
+from reckon.transport.bus import BusSession, Publisher, TokenWatch
 
 log = logging.getLogger(__name__)
 
@@ -296,27 +294,26 @@ class HubWatch:
     after the link's lease (10 s by default), which the resend window covers.
     """
 
-    def __init__(self, session: zenoh.Session, venue: str):
+    def __init__(self, session: BusSession, venue: str):
         self.up = threading.Event()
         self.losses = 0
         self._present: set[str] = set()
         self._lock = threading.Lock()
-        self._subscriber = session.liveliness().declare_subscriber(
-            wire.alive_selector(venue, wire.Role.HUB), self._on_token, history=True)
+        self._tokens = TokenWatch(session, wire.alive_selector(venue, wire.Role.HUB), self._on_token)
 
-    def _on_token(self, sample: zenoh.Sample) -> None:  # Zenoh's callback thread: never blocks
+    def _on_token(self, key: str, up: bool) -> None:  # Zenoh's callback thread: never blocks
         with self._lock:
-            if sample.kind == zenoh.SampleKind.PUT:
-                self._present.add(str(sample.key_expr))
+            if up:
+                self._present.add(key)
                 self.up.set()
-            elif str(sample.key_expr) in self._present:
-                self._present.discard(str(sample.key_expr))
+            elif key in self._present:
+                self._present.discard(key)
                 if not self._present:
                     self.losses += 1
                     self.up.clear()
 
     def close(self) -> None:
-        self._subscriber.undeclare()
+        self._tokens.close()
 
 
 class SpooledPublisher:
@@ -332,7 +329,7 @@ class SpooledPublisher:
     (or within `wait_s` comes) up, and otherwise leaves it on disk for the next start.
     """
 
-    def __init__(self, session: zenoh.Session, publisher: Publisher, venue: str, spool: Spool,
+    def __init__(self, session: BusSession, publisher: Publisher, venue: str, spool: Spool,
                  resend_window: int = RESEND_WINDOW, replay_per_message: int = REPLAY_PER_MESSAGE):
         self.publisher, self.spool = publisher, spool
         self.watch = HubWatch(session, venue)
@@ -423,7 +420,7 @@ class SpooledPublisher:
 
 
 @contextmanager
-def edge_publisher(bus: zenoh.Session, venue: str, directory: Path | None,
+def edge_publisher(bus: BusSession, venue: str, directory: Path | None,
                    limit_bytes: int = DEFAULT_LIMIT_BYTES) -> Iterator[Publisher | SpooledPublisher]:
     """The edge's publisher: spooled to `directory` while no hub is up, or plain when None."""
     with Publisher(bus) as publisher:

@@ -7,7 +7,8 @@ Why it can never slow the hub: the hub thread only appends to a bounded deque (`
 `on_output`: O(1), no lock, no wait; when the view falls `HANDOVER` messages behind the oldest
 are dropped and counted). Truth poses and device status, which the hub does not subscribe to,
 come from the view's own subscribers on the hub's Zenoh session with ring handlers (drop oldest,
-never push back on a publisher). The view's thread runs an aiohttp server on its own event loop;
+never push back on a publisher). The view's thread runs an aiohttp server on its own event loop
+(edge/sources/background_server.py, shared with the phone source);
 every TICK_S it drains both into `ViewState` (fixed size, reckon/web/court_state.py), builds one
 JSON snapshot (coalescing: however many poses came, the page gets the latest) and wakes each
 browser's sender, which sends the newest snapshot when its socket is free: a slow browser skips
@@ -30,13 +31,14 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-import zenoh
 from aiohttp import WSMsgType, web
 
+from edge.sources.background_server import BackgroundServer
 from protocol import bus as wire
 from protocol import keys
 from protocol.errors import ConfigError, InputError
 from protocol.session import Session
+from reckon.transport.bus import BusSession, DirectSubscription
 from reckon.web.court_state import ViewState, venue_description
 
 log = logging.getLogger(__name__)
@@ -77,15 +79,11 @@ class CourtView:
         self.ticks = 0
         self._subscribers: list[Any] = []
         self._subscribers_lock = threading.Lock()
-        self._closing = threading.Event()
-        self._started = threading.Event()
-        self._error: BaseException | None = None
-        self.port = 0
-        self._thread = threading.Thread(target=self._run, args=(port,), name="court-view", daemon=True)
+        self.server = BackgroundServer(f"--view {host}:{port}", self._app, [(host, port, None)], self._tick)
+        self._thread = threading.Thread(target=self._run, name="court-view", daemon=True)
         self._thread.start()
-        self._started.wait()
-        if self._error is not None:
-            raise ConfigError(f"--view {host}:{port}: cannot listen ({self._error})") from self._error
+        self.server.wait_listening()
+        self.port = self.server.ports[0]
         log.info("court view: %s", self.url)
 
     @property
@@ -116,10 +114,10 @@ class CourtView:
         self.handed += 1
 
     @contextmanager
-    def attach(self, bus: zenoh.Session) -> Iterator[None]:
+    def attach(self, bus: BusSession) -> Iterator[None]:
         """Subscribe to every agent's truth pose and device status on `bus` until the block ends."""
         venue = self.session.venue.name
-        declared = [bus.declare_subscriber(keys.all_agents(venue, stream), zenoh.handlers.RingChannel(RING))
+        declared = [DirectSubscription.ring(bus, keys.all_agents(venue, stream), RING)
                     for stream in ("truth/pose", "status/*")]
         with self._subscribers_lock:
             self._subscribers = declared
@@ -147,9 +145,9 @@ class CourtView:
         with self._subscribers_lock:
             subscribers = list(self._subscribers)
         for subscriber in subscribers:
-            while (sample := subscriber.try_recv()) is not None:
+            while (sample := subscriber.try_get()) is not None:
                 try:
-                    message = wire.decode(str(sample.encoding), sample.payload.to_bytes(), str(sample.key_expr))
+                    message = wire.decode(sample.encoding, sample.payload, sample.key)
                 except InputError:
                     self.bad_samples += 1
                     continue
@@ -164,38 +162,29 @@ class CourtView:
         self.ticks += 1
         return self.snapshot_json
 
-    def _run(self, port: int) -> None:
+    def _run(self) -> None:
         try:
-            asyncio.run(self._serve(port))
-        except BaseException as error:  # before start-up: raised by the constructor; after: logged
-            if not self._started.is_set():
-                self._error = error
-                self._started.set()
-            else:
-                log.error("court view stopped: %s", error)
+            self.server.run()
+        except BaseException as error:  # before start-up the constructor raises it (wait_listening); after: logged
+            log.error("court view stopped: %s", error)
 
-    async def _serve(self, port: int) -> None:
+    def _app(self) -> web.Application:
         self._fresh = asyncio.Condition()
         self._sockets: set[web.WebSocketResponse] = set()
         app = web.Application()
         app.on_shutdown.append(self._close_sockets)
         app.add_routes([web.get("/", self._page), web.get("/venue.json", self._venue), web.get("/state.json", self._state),
                         web.get("/ws", self._ws), web.static("/static", STATIC_DIR)])
-        runner = web.AppRunner(app, access_log=None, handle_signals=False)
-        await runner.setup()
-        try:
-            site = web.TCPSite(runner, self.host, port)
-            await site.start()
-            self.port = site._server.sockets[0].getsockname()[1]  # type: ignore[union-attr]
-            self._started.set()
-            while not self._closing.is_set():
-                await asyncio.sleep(TICK_S)
-                self.drain()
-                self.publish_snapshot()
-                async with self._fresh:
-                    self._fresh.notify_all()
-        finally:
-            await runner.cleanup()
+        return app
+
+    async def _tick(self) -> None:
+        """While the server listens: every TICK_S, take what arrived and wake the browsers' senders."""
+        while not self.server.closing:
+            await asyncio.sleep(TICK_S)
+            self.drain()
+            self.publish_snapshot()
+            async with self._fresh:
+                self._fresh.notify_all()
 
     async def _page(self, request: web.Request) -> web.FileResponse:
         return web.FileResponse(STATIC_DIR / "index.html")
@@ -238,7 +227,7 @@ class CourtView:
             return
 
     def close(self) -> None:
-        self._closing.set()
+        self.server.close()
         self._thread.join(timeout=5.0)
 
     def __enter__(self) -> CourtView:

@@ -1,5 +1,5 @@
-"""A simulated ATR-Promotions TSND121/151 on a real pseudo-terminal. Unlike the x-IMU3 of
-`serial_device` it is commanded: it answers the host and streams only while measuring.
+"""A simulated ATR-Promotions TSND121/151 on a real pseudo-terminal (`pty.PtyDevice`). Unlike the
+x-IMU3 of `ximu3` it is commanded: it answers the host and streams only while measuring.
 
     with TsndDevice.from_session("swim.mcap", "swimmer-waist", speed=1) as dev:   # idle, listening
         with SerialSource.from_url(f"serial://{dev.port}?protocol=tsnd&rate_hz=1000") as source:
@@ -23,7 +23,7 @@ Values are clipped to the commanded ranges (default +-16 g, +-2000 deg/s).
 Pacing: after start, sample i is written at (time_ns[i] - time_ns[first]) / speed; speed 0 or inf
 writes as fast as the reader takes it (the pty's small buffer holds the writer back).
 
-Faults (serial_device.Faults, seeded, decided up front per sample index i, counted from 1 as i + 1):
+Faults (`pty.Faults`, seeded, decided up front per sample index i, counted from 1 as i + 1):
 garbage before every Nth sample's frames (never damages a frame), one byte dropped from every Nth
 0x80 frame, one byte changed in every Nth 0x80 frame (its BCC then fails). `damaged` holds the
 sample indices whose 0x80 frame was damaged; `streamed` the indices sent, in order.
@@ -31,28 +31,27 @@ sample indices whose 0x80 frame was damaged; `streamed` the indices sent, in ord
 
 from __future__ import annotations
 
-import math
 import os
 import select
 import threading
 import time
-import tty
 from array import array
 from pathlib import Path
+from typing import Self
 
 import numpy as np
 
 from edge.decoders import tsnd
 from edge.decoders.tsnd import TsndDecoder, TsndMessage, build_frame
-from protocol.errors import InputError
-from sim_devices.devices.ximu3 import POLL_S, WRITE_BLOCK_BYTES, Faults
+from sim_devices.devices.pty import POLL_S, WRITE_BLOCK_BYTES, Faults, PtyDevice, session_series
 from sim_devices.devices.tsnd_encoder import inertial_frames, magnetometer_frames
 
 BLOCK_SAMPLES = 160  # samples encoded at once: about one 4 KB write
+COMMAND_READ_BYTES = 4096  # host commands are a few bytes each: one read takes all that are waiting
 NO_END = [100, 1, 1, 0, 0, 0]  # 0x93 end time meaning "none" (maselab checks for it)
 
 
-class TsndDevice:
+class TsndDevice(PtyDevice):
     """Context manager: on enter the pty exists and the device listens; on exit it stops and
     closes both ends (a reader then sees the device disappear)."""
 
@@ -65,11 +64,9 @@ class TsndDevice:
         for name, values in (("accel_g", accel_g), ("gyro_dps", gyro_dps), ("mag_gauss", mag_gauss)):
             if values is not None and np.shape(values) != (count, 3):
                 raise ValueError(f"{name} has shape {np.shape(values)}, expected ({count}, 3)")
-        if not speed >= 0.0:
-            raise ValueError(f"speed {speed} must be >= 0 (0 or inf = as fast as possible)")
+        super().__init__(speed=speed)
         self.accel_g, self.gyro_dps = np.asarray(accel_g, float), np.asarray(gyro_dps, float)
         self.mag_gauss = None if mag_gauss is None else np.asarray(mag_gauss, float)
-        self.speed = speed
         self.faults = faults or Faults()
         self.damaged = self._damaged_indices(count)
         self.sample_period_ns = int(np.median(np.diff(self.time_ns)))
@@ -80,9 +77,6 @@ class TsndDevice:
         self.measuring = False
         self.streamed = array("q")  # sample indices sent, in order
         self.commands: list[int] = []  # command codes received, in order
-        self.bytes_written = 0
-        self.port = ""
-        self.error: BaseException | None = None  # what ended the device thread early, if anything
         self.finished = threading.Event()  # every sample was sent
         self.idle = threading.Event()  # not measuring (set until a start, and again after a stop)
         self.idle.set()
@@ -91,38 +85,12 @@ class TsndDevice:
         self._start_wall = 0.0
         self._out = bytearray()
         self._listener = TsndDecoder(tsnd.COMMAND_PARAM_BYTES)
-        self._master: int | None = None
-        self._slave: int | None = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
 
-    # -- lifetime -------------------------------------------------------------------------------
-
-    def open(self) -> "TsndDevice":
-        """Create the pty pair (slave raw at once, so nothing is translated) and start listening."""
-        if self._master is None:
-            self._master, self._slave = os.openpty()
-            tty.setraw(self._slave)
-            os.set_blocking(self._master, False)
-            self.port = os.ttyname(self._slave)
-            self._thread = threading.Thread(target=self._run, name=f"TsndDevice {self.port}", daemon=True)
-            self._thread.start()
+    def open(self) -> Self:
+        """Create the pty pair and start listening."""
+        super().open()
+        self._start_thread()
         return self
-
-    def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-        for fd in (self._master, self._slave):
-            if fd is not None:
-                os.close(fd)
-        self._master = self._slave = None
-
-    def __enter__(self) -> "TsndDevice":
-        return self.open()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def expected_indices(self) -> list[int]:
         """The streamed samples whose 0x80 frame arrived intact (a decoder must recover all of them)."""
@@ -130,27 +98,16 @@ class TsndDevice:
 
     # -- the device thread ----------------------------------------------------------------------
 
-    def _run(self) -> None:
-        master = self._master
-        if master is None:  # closed before the thread ran
-            return
-        try:
-            while not self._stop.is_set():
-                wait_s = self._stream() if self.measuring else POLL_S
-                # with bytes to write, select returns as soon as the pty takes more
-                readable, writable, _ = select.select([master], [master] if self._out else [], [],
-                                                      POLL_S if self._out else min(wait_s, POLL_S))
-                if readable:
-                    self._commands(os.read(master, 4096))
-                if writable and self._out:
-                    written = os.write(master, self._out)
-                    del self._out[:written]
-                    self.bytes_written += written
-        except OSError as error:  # the pty was closed under us
-            self.error = error
-        except Exception as error:  # a bug: kept for the test to report (it would only print in a thread)
-            self.error = error
-            raise
+    def _serve(self, master: int) -> None:
+        while not self._stop.is_set():
+            wait_s = self._stream() if self.measuring else POLL_S
+            # with bytes to write, select returns as soon as the pty takes more
+            readable, writable, _ = select.select([master], [master] if self._out else [], [],
+                                                  POLL_S if self._out else min(wait_s, POLL_S))
+            if readable:
+                self._commands(os.read(master, COMMAND_READ_BYTES))
+            if writable and self._out:
+                del self._out[:self._write(master, self._out)]
 
     def _commands(self, data: bytes) -> None:
         for frame in self._listener.feed(data):
@@ -216,8 +173,8 @@ class TsndDevice:
             self._end()
             self.finished.set()
             return POLL_S
-        if 0.0 < self.speed < math.inf:
-            due_s = (self.time_ns[indices] - self.time_ns[self._first]) * 1e-9 / self.speed
+        if self.paced:
+            due_s = self.due_s(self.time_ns[indices] - self.time_ns[self._first])
             elapsed_s = time.monotonic() - self._start_wall
             ready = int(np.searchsorted(due_s, elapsed_s, side="right"))
             if ready == 0:
@@ -275,10 +232,5 @@ class TsndDevice:
     def from_session(cls, session_path: Path | str, sensor_id: str, *, speed: float = 1.0,
                      faults: Faults | None = None) -> "TsndDevice":
         """Play one sensor of a session log (a simulated or imported swim)."""
-        from protocol.session_log import read_session  # mcap only when a session is read
-
-        data = read_session(session_path)
-        if sensor_id not in data.imu:
-            raise InputError(f"{session_path}: no IMU {sensor_id!r} (has: {', '.join(sorted(data.imu)) or 'none'})")
-        series = data.imu[sensor_id]
+        series = session_series(session_path, sensor_id)
         return cls(series.time_ns, series.accel_g, series.gyro_dps, series.mag_gauss, speed=speed, faults=faults)

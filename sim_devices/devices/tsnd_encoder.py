@@ -69,3 +69,12 @@ def encode_samples(time_ns: np.ndarray, accel_g: np.ndarray, gyro_dps: np.ndarra
         if magnetometer is not None and i % mag_every == 0:
             yield stamp, magnetometer[i].tobytes()
         yield stamp, inertial[i].tobytes()
+
+
+def fuzz_frames(rng: np.random.Generator, start_ms: int, count: int) -> list[bytes]:
+    """`reckon fuzz`'s intact frames (edge.decoders.tsnd.DEVICE): `count` 0x80 frames 1 ms apart (a
+    0x81 every 10th) with random in-range values."""
+    time_ns = (start_ms + np.arange(count, dtype=np.int64)) * 1_000_000
+    accel, gyro = rng.uniform(-15.9, 15.9, (count, 3)), rng.uniform(-1990, 1990, (count, 3))
+    mag = rng.uniform(-0.6, 0.6, (count, 3))
+    return [frame for _, frame in encode_samples(time_ns, accel, gyro, mag, mag_every=10)]

@@ -68,3 +68,13 @@ def encode_samples(time_ns: np.ndarray, gyro_dps: np.ndarray, accel_g: np.ndarra
         if mag is not None and i % mag_every == 0:
             yield stamp, magnetometer(timestamp_us, mag[i])
         yield stamp, inertial(timestamp_us, gyro[i], accel[i])
+
+
+def fuzz_frames(rng: np.random.Generator, start_ms: int, count: int) -> list[bytes]:
+    """`reckon fuzz`'s intact frames (edge.decoders.ximu3.DEVICE): `count` I messages 1 ms apart (an
+    M every 10th), binary or ASCII as the block draws."""
+    time_ns = (start_ms + np.arange(count, dtype=np.int64)) * 1_000_000
+    gyro, accel = rng.uniform(-1990, 1990, (count, 3)), rng.uniform(-15.9, 15.9, (count, 3))
+    mag = rng.uniform(-0.6, 0.6, (count, 3))
+    ascii = bool(rng.integers(0, 2))
+    return [frame for _, frame in encode_samples(time_ns, gyro, accel, mag, ascii=ascii, mag_every=10)]

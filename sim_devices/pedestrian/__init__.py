@@ -8,7 +8,7 @@ trouser pocket, stopping at QR calibration stands, as the indoor-navigation pape
 rooms and a hall, polygons with holes). Modules, in data-flow order: params, venues, person ->
 path -> timeline -> phone -> sensors -> simulate -> session; calibration measures the paper's
 speed model and stand-to-turn heading error on generated walks. `reckon sim pedestrian` is in
-reckon/cli.py.
+reckon/cli/sim.py.
 
 Names are imported on first use (PEP 562), so importing the package loads none of numpy, scipy
 and shapely.

@@ -41,7 +41,7 @@ class GaitParams:
 
     cadence_min_hz: float = _p(1.6, "Hz", 0.8, 3.0, "preferred cadence drawn per person in [min, max]; adults "
                                "walk at about 100-125 steps/min at comfortable speed (e.g. Tudor-Locke et al. 2019, "
-                               "CADENCE-Adults); the paper's Fig. 3 peak: 1.8 Hz; range 1.6-2.1 Hz as issue 4 asks")
+                               "CADENCE-Adults); the paper's Fig. 3 peak, 1.8 Hz, lies inside 1.6-2.1 Hz")
     cadence_max_hz: float = _p(2.1, "Hz", 0.8, 3.0, "see cadence_min_hz")
     step_height_ratio: float = _p(0.37, "1", 0.2, 0.6, "step length / stature at the reference cadence: the "
                                   "paper's eq. 2 (V = 0.37 H f, its ref. [5]) read as step length 0.37 H; the "

@@ -31,12 +31,11 @@ from scipy.spatial.transform import Rotation
 
 from protocol.messages import STANDARD_GRAVITY_MS2 as STANDARD_GRAVITY
 from protocol.session import Mount, Stand
-from sim_devices.common import small_rotation
+from sim_devices.common import angular_rate, small_rotation
 from sim_devices.pedestrian.params import PedestrianParams
 from sim_devices.pedestrian.path import SmoothPath
 from sim_devices.pedestrian.person import Person
 from sim_devices.pedestrian.timeline import Timeline
-from sim_devices.room.imu import angular_rate
 
 GRIP_CHANGE_S = 0.6  # a new grip is taken over this long
 WANDER_TONES = 5  # sinusoids making up the slow hand wander, 0.2-2 Hz

@@ -1,4 +1,4 @@
-"""The phone's sensors: the indoor magnetic field, and what a BMI160 / AK09911-class phone reports.
+"""The phone's sensors: the indoor magnetic field, and the figures of a BMI160 / AK09911-class phone.
 
 Field (venue frame, uT): Earth's field (intensity, inclination, declination; north at
 `magnetic.north_deg`) times the floor's shielding factor 1 - mid_floor_loss x sin^2(pi floor /
@@ -6,12 +6,13 @@ storeys), plus a local anomaly: a sum of `ANOMALY_WAVES` plane waves in x, y wit
 amplitudes (SD `anomaly_ut` per component in total) and wavelengths in [anomaly_min_m,
 anomaly_max_m]. Drawn once per venue, so every walker meets the same anomalies.
 
-Errors (drawn once per phone): one misalignment of the sensor package in the phone body; per
-axis scale and turn-on bias for accelerometer, gyroscope and magnetometer (hard and soft iron
-left after Android's calibration); per sample: gyro bias random walk, white noise (density x
-sqrt(rate / 2)), then clipping at the range and rounding to the ADC step. Timestamps: the true
-instant plus Gaussian jitter, kept strictly increasing; the phone's clock is the truth's clock
-(as in a phone's own recording, e.g. the ILC walks).
+Errors (`sim_devices.devices.imu`, drawn once per phone): one misalignment of the sensor package
+in the phone body; per axis scale and turn-on bias for accelerometer, gyroscope and magnetometer
+(hard and soft iron left after Android's calibration); per sample: gyro bias random walk, white
+noise (density x sqrt(rate / 2)), then clipping at the range and rounding to the ADC step.
+Timestamps (`sim_devices.devices.clock.jittered_stamps_ns`): the true instant plus Gaussian
+jitter, kept strictly increasing; the phone's clock is the truth's clock (as in a phone's own
+recording, e.g. the ILC walks).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim_devices.common import small_rotation
+from sim_devices.devices.imu import Imu, Triad, accel_triad, gyro_triad
 from sim_devices.pedestrian.params import MagneticParams, SensorParams
 
 ANOMALY_WAVES = 24
@@ -54,57 +56,23 @@ class MagneticField:
         return self.earth_ut[None, :] + waves @ self.amplitudes_ut
 
 
-@dataclass(frozen=True)
-class PhoneErrors:
-    """One phone's sensor errors, drawn once."""
-
-    misalignment: np.ndarray  # (3, 3) sensor-to-phone
-    accel_scale: np.ndarray
-    accel_bias_g: np.ndarray
-    gyro_scale: np.ndarray
-    gyro_bias_dps: np.ndarray
-    mag_scale: np.ndarray
-    mag_bias_ut: np.ndarray
-
-    @classmethod
-    def draw(cls, sensors: SensorParams, rng: np.random.Generator) -> "PhoneErrors":
-        return cls(small_rotation(rng, sensors.misalignment_deg),
-                   1.0 + rng.normal(0.0, sensors.accel_scale_error, 3), rng.normal(0.0, sensors.accel_bias_g, 3),
-                   1.0 + rng.normal(0.0, sensors.gyro_scale_error, 3), rng.normal(0.0, sensors.gyro_bias_dps, 3),
-                   1.0 + rng.normal(0.0, sensors.mag_scale_error, 3), rng.normal(0.0, sensors.mag_bias_ut, 3))
-
-    def to_dict(self) -> dict[str, list[float]]:
-        return {"accel_bias_g": self.accel_bias_g.tolist(), "accel_scale": self.accel_scale.tolist(),
-                "gyro_bias_dps": self.gyro_bias_dps.tolist(), "gyro_scale": self.gyro_scale.tolist(),
-                "mag_bias_ut": self.mag_bias_ut.tolist(), "mag_scale": self.mag_scale.tolist()}
+def phone_triads(sensors: SensorParams) -> dict[str, Triad]:
+    """The phone's accelerometer, gyroscope, then magnetometer (the order their errors are drawn and
+    sensed in); the magnetometer has no bias walk and its own step and range."""
+    magnetometer = Triad(sensors.mag_scale_error, sensors.mag_bias_ut, sensors.mag_noise_ut, sensors.mag_range_ut,
+                         sensors.mag_step_ut)
+    return {"accel": accel_triad(sensors), "gyro": gyro_triad(sensors), "mag": magnetometer}
 
 
-def measure(accel_g: np.ndarray, gyro_dps: np.ndarray, field_ut: np.ndarray, errors: PhoneErrors,
-            sensors: SensorParams, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Reported (accel g, gyro deg/s, mag uT), (n, 3) each, from exact phone-frame signals."""
-    n, rate = len(accel_g), sensors.rate_hz
-    band = math.sqrt(rate / 2.0)
-    turn = errors.misalignment.T  # phone frame to sensor frame
-    accel = (accel_g @ turn.T) * errors.accel_scale + errors.accel_bias_g
-    accel += rng.normal(0.0, sensors.accel_noise_g_per_sqrt_hz * band, (n, 3))
-    walk = np.cumsum(rng.normal(0.0, sensors.gyro_bias_walk_dps_per_sqrt_s / math.sqrt(rate), (n, 3)), axis=0)
-    gyro = (gyro_dps @ turn.T) * errors.gyro_scale + errors.gyro_bias_dps + walk
-    gyro += rng.normal(0.0, sensors.gyro_noise_dps_per_sqrt_hz * band, (n, 3))
-    mag = (field_ut @ turn.T) * errors.mag_scale + errors.mag_bias_ut + rng.normal(0.0, sensors.mag_noise_ut, (n, 3))
-    mag = np.clip(np.round(mag / sensors.mag_step_ut) * sensors.mag_step_ut, -sensors.mag_range_ut,
-                  sensors.mag_range_ut)
-    return (_digitise(accel, sensors.accel_range_g, sensors.adc_bits),
-            _digitise(gyro, sensors.gyro_range_dps, sensors.adc_bits), mag)
+def draw_phone(sensors: SensorParams, rng: np.random.Generator) -> Imu:
+    """One phone's sensors: the package's misalignment in the phone body, then every triad's errors."""
+    misalignment = small_rotation(rng, sensors.misalignment_deg)  # sensor-to-phone
+    return Imu.draw(phone_triads(sensors), rng, mounting=misalignment.T)  # signals come in the phone frame
 
 
-def _digitise(values: np.ndarray, full_scale: float, bits: int) -> np.ndarray:
-    step = full_scale / 2 ** (bits - 1)
-    return np.clip(np.round(values / step) * step, -full_scale, full_scale)
-
-
-def stamps_ns(true_ns: np.ndarray, sensors: SensorParams, rng: np.random.Generator) -> np.ndarray:
-    """Sample timestamps: the true instants plus jitter, strictly increasing."""
-    jitter = np.round(rng.normal(0.0, sensors.timestamp_jitter_ms * 1e6, len(true_ns))).astype(np.int64)
-    stamps = true_ns + jitter
-    floor = np.maximum.accumulate(stamps - np.arange(len(stamps)))  # strictly increasing by at least 1 ns
-    return floor + np.arange(len(stamps))
+def error_record(phone: Imu) -> dict[str, list[float]]:
+    """The drawn biases and scales, as the session's source records them."""
+    accel, gyro, mag = phone.errors["accel"], phone.errors["gyro"], phone.errors["mag"]
+    return {"accel_bias_g": accel.bias.tolist(), "accel_scale": accel.response.tolist(),
+            "gyro_bias_dps": gyro.bias.tolist(), "gyro_scale": gyro.response.tolist(),
+            "mag_bias_ut": mag.bias.tolist(), "mag_scale": mag.response.tolist()}

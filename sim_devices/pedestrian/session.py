@@ -37,7 +37,7 @@ from protocol.messages import imu_batch
 from protocol.session import Agent, AgentKind, Mount, Sensor, Session, Venue
 from sim_devices.common import Item, write_merged
 from sim_devices.pedestrian.params import PedestrianParams, check
-from sim_devices.pedestrian.sensors import MagneticField
+from sim_devices.pedestrian.sensors import MagneticField, error_record
 from sim_devices.pedestrian.simulate import MOUNTS, WalkerRun, simulate_walker, truth_rows
 from sim_devices.pedestrian.venues import PRESETS, Layout, layout
 
@@ -146,7 +146,7 @@ def _describe(plan: Layout, runs: list[WalkerRun], params: PedestrianParams, fie
                 forward, left = POCKET_AXES[(first["top_down"], first["screen_in"])]
             sensors.append(Sensor(phone.sensor_id, phone.mount, params.sensors.rate_hz, forward_axis=forward,
                                   left_axis=left))
-            phones[phone.sensor_id] = {"errors": phone.errors.to_dict(), "holds": list(phone.motion.holds),
+            phones[phone.sensor_id] = {"errors": error_record(phone.imu), "holds": list(phone.motion.holds),
                                        "stand_windows": [{"stand_id": w.stand.id, "place_s": w.place_s,
                                                           "still_s": w.still_s, "pick_s": w.pick_s,
                                                           "done_s": w.done_s,

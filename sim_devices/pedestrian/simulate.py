@@ -15,11 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from protocol.session import Mount
+from sim_devices.devices.clock import jittered_stamps_ns
+from sim_devices.devices.imu import Imu
 from sim_devices.pedestrian.params import PedestrianParams
 from sim_devices.pedestrian.path import Corner, SmoothPath, smooth_path
 from sim_devices.pedestrian.person import Person, draw_person
 from sim_devices.pedestrian.phone import PhoneMotion, StandWindow, exact_signals, phone_motion, stand_windows
-from sim_devices.pedestrian.sensors import MagneticField, PhoneErrors, measure, stamps_ns
+from sim_devices.pedestrian.sensors import MagneticField, draw_phone
 from sim_devices.pedestrian.timeline import Timeline, pause_stops, stand_stops, walk_timeline
 from sim_devices.pedestrian.venues import Layout
 
@@ -37,7 +39,7 @@ class PhoneStream:
     gyro_dps: np.ndarray
     mag_gauss: np.ndarray
     motion: PhoneMotion
-    errors: PhoneErrors
+    imu: Imu  # the drawn misalignment and errors
 
 
 @dataclass(frozen=True)
@@ -93,11 +95,12 @@ def simulate_walker(layout: Layout, index: int, mounts: tuple[Mount, ...], param
         motion = phone_motion(mount, path, timeline, person, windows[number], params, phone_rng)
         accel, gyro = exact_signals(motion, rate)
         field_ut = np.einsum("nji,nj->ni", motion.rotation, field.at(motion.position_m))
-        errors = PhoneErrors.draw(params.sensors, phone_rng)
-        accel, gyro, mag = measure(accel, gyro, field_ut, errors, params.sensors, phone_rng)
-        phones.append(PhoneStream(sensor_id(person.person_id, mount), mount, stamps_ns(true_ns, params.sensors, phone_rng),
-                                  accel.astype(np.float32), gyro.astype(np.float32),
-                                  (mag / 100.0).astype(np.float32), motion, errors))  # 1 gauss = 100 uT
+        imu = draw_phone(params.sensors, phone_rng)
+        reported = imu.measure({"accel": accel, "gyro": gyro, "mag": field_ut}, phone_rng)
+        stamps = jittered_stamps_ns(true_ns, params.sensors.timestamp_jitter_ms, phone_rng)
+        phones.append(PhoneStream(sensor_id(person.person_id, mount), mount, stamps,
+                                  reported["accel"].astype(np.float32), reported["gyro"].astype(np.float32),
+                                  (reported["mag"] / 100.0).astype(np.float32), motion, imu))  # 1 gauss = 100 uT
     return WalkerRun(person, path, timeline, start_ns, tuple(phones))
 
 

@@ -9,20 +9,22 @@ z up when standing (Sensor forward_axis "+x", left_axis "+y"). Specific force = 
 of the sensor position at the IMU rate plus the heel-strike transients plus g up, resolved in the
 sensor frame, in g; angular rate = vee(R^T dR/dt) in the sensor frame, in deg/s.
 
-Errors (drawn once per sensor): per-axis scale, turn-on biases; per sample: gyro bias random walk
-and white noise (density x sqrt(rate / 2)); then the ADC clips at the range and rounds to its
-16-bit step. Clock: device time = (1 + drift) x true time + offset (both drawn per sensor); samples
-are taken at true instants, only their stamps carry the clock error. No magnetometer.
+Errors (`sim_devices.devices.imu`, drawn once per sensor): per-axis scale, turn-on biases; per
+sample: gyro bias random walk and white noise (density x sqrt(rate / 2)); then the ADC clips at the
+range and rounds to its 16-bit step. Clock (`sim_devices.devices.clock`): device time = (1 + drift)
+x true time + offset (both drawn per sensor); samples are taken at true instants, only their stamps
+carry the clock error. No magnetometer.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from sim_devices.common import small_rotation
+from sim_devices.common import angular_rate, small_rotation
+from sim_devices.devices.clock import DeviceClock
+from sim_devices.devices.imu import Imu, Triad, accel_triad, gyro_triad
 from sim_devices.room.gait import STANDARD_GRAVITY, BodyMotion
 from sim_devices.room.params import LinkParams, SensorParams
 
@@ -39,15 +41,6 @@ def rotation(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.ndarray
     return out
 
 
-def angular_rate(rotations: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Body-frame angular velocity (rad/s) of (n, 3, 3) body-to-world rotations sampled at `rate_hz`."""
-    change = np.empty_like(rotations)
-    change[1:-1] = rotations[2:] - rotations[:-2]
-    change[0], change[-1] = 2.0 * (rotations[1] - rotations[0]), 2.0 * (rotations[-1] - rotations[-2])
-    w = np.einsum("nji,njk->nik", rotations, change) * (rate_hz / 2.0)
-    return np.stack([w[:, 2, 1] - w[:, 1, 2], w[:, 0, 2] - w[:, 2, 0], w[:, 1, 0] - w[:, 0, 1]], axis=1) / 2.0
-
-
 def exact_signals(body: BodyMotion, mounting: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
     """Error-free (specific force g, angular rate deg/s), (n, 3) each, in the sensor frame."""
     pelvis = rotation(body.yaw_rad, body.pitch_rad, body.roll_rad)
@@ -61,62 +54,16 @@ def exact_signals(body: BodyMotion, mounting: np.ndarray, rate_hz: float) -> tup
     return specific, np.degrees(angular_rate(sensor, rate_hz))
 
 
-@dataclass(frozen=True)
-class ImuErrors:
-    """One sensor's mounting and errors, drawn once."""
-
-    belt_pitch_deg: float
-    mounting: np.ndarray  # (3, 3) sensor-to-pelvis rotation
-    accel_scale: np.ndarray  # (3,) 1 + error
-    accel_bias_g: np.ndarray
-    gyro_scale: np.ndarray
-    gyro_bias_dps: np.ndarray
-
-    @classmethod
-    def draw(cls, sensors: SensorParams, rng: np.random.Generator) -> "ImuErrors":
-        pitch = float(rng.uniform(-sensors.belt_pitch_deg, sensors.belt_pitch_deg))
-        belt = rotation(np.zeros(1), np.radians([pitch]), np.zeros(1))[0]
-        mounting = belt @ small_rotation(rng, sensors.misalignment_deg)
-        return cls(pitch, mounting, 1.0 + rng.normal(0.0, sensors.accel_scale_error, 3),
-                   rng.normal(0.0, sensors.accel_bias_g, 3), 1.0 + rng.normal(0.0, sensors.gyro_scale_error, 3),
-                   rng.normal(0.0, sensors.gyro_bias_dps, 3))
+def draw_mounting(sensors: SensorParams, rng: np.random.Generator) -> tuple[float, np.ndarray]:
+    """(belt pitch deg, (3, 3) sensor-to-pelvis rotation): the belt's pitch, then a small misalignment."""
+    pitch = float(rng.uniform(-sensors.belt_pitch_deg, sensors.belt_pitch_deg))
+    belt = rotation(np.zeros(1), np.radians([pitch]), np.zeros(1))[0]
+    return pitch, belt @ small_rotation(rng, sensors.misalignment_deg)
 
 
-def measure(accel_g: np.ndarray, gyro_dps: np.ndarray, errors: ImuErrors, sensors: SensorParams,
-            rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Reported (accel g, gyro deg/s), (n, 3) each, from exact sensor-frame signals (draw order fixed)."""
-    n, rate = len(accel_g), sensors.rate_hz
-    band = math.sqrt(rate / 2.0)  # white noise over the Nyquist band
-    accel = accel_g * errors.accel_scale + errors.accel_bias_g
-    accel += rng.normal(0.0, sensors.accel_noise_g_per_sqrt_hz * band, (n, 3))
-    walk = np.cumsum(rng.normal(0.0, sensors.gyro_bias_walk_dps_per_sqrt_s / math.sqrt(rate), (n, 3)), axis=0)
-    gyro = gyro_dps * errors.gyro_scale + errors.gyro_bias_dps + walk
-    gyro += rng.normal(0.0, sensors.gyro_noise_dps_per_sqrt_hz * band, (n, 3))
-    return (_digitise(accel, sensors.accel_range_g, sensors.adc_bits),
-            _digitise(gyro, sensors.gyro_range_dps, sensors.adc_bits))
-
-
-def _digitise(values: np.ndarray, full_scale: float, bits: int) -> np.ndarray:
-    step = full_scale / 2 ** (bits - 1)
-    return np.clip(np.round(values / step) * step, -full_scale, full_scale)
-
-
-@dataclass(frozen=True)
-class DeviceClock:
-    """device time = (1 + drift) x true time + offset, stamped in ns from the session epoch."""
-
-    epoch_ns: int
-    offset_s: float
-    drift: float
-
-    @classmethod
-    def draw(cls, link: LinkParams, rng: np.random.Generator) -> "DeviceClock":
-        return cls(link.start_unix_s * 1_000_000_000, float(rng.normal(0.0, link.clock_offset_ms * 1e-3)),
-                   float(rng.normal(0.0, link.clock_drift_ppm * 1e-6)))
-
-    def stamp_ns(self, true_s: np.ndarray) -> np.ndarray:
-        device_s = (1.0 + self.drift) * np.asarray(true_s, dtype=np.float64) + self.offset_s
-        return self.epoch_ns + np.round(device_s * 1e9).astype(np.int64)
+def imu_triads(sensors: SensorParams) -> dict[str, Triad]:
+    """The waist IMU's accelerometer, then gyroscope (the order their errors are drawn and sensed in)."""
+    return {"accel": accel_triad(sensors), "gyro": gyro_triad(sensors)}
 
 
 @dataclass(frozen=True)
@@ -126,7 +73,9 @@ class WaistImu:
     agent_id: str
     sensor_id: str
     clock: DeviceClock
-    errors: ImuErrors
+    belt_pitch_deg: float
+    mounting: np.ndarray  # (3, 3) sensor-to-pelvis rotation
+    imu: Imu  # drawn errors (the mounting is in the exact signals)
     stamps_ns: np.ndarray  # (n,) int64, device clock
     accel_g: np.ndarray  # (n, 3) float32
     gyro_dps: np.ndarray
@@ -135,12 +84,14 @@ class WaistImu:
 def waist_imu(agent_id: str, body: BodyMotion, time_s: np.ndarray, sensors: SensorParams, link: LinkParams,
               rng: np.random.Generator) -> WaistImu:
     """The waist sensor's stream for one person (draw order: mounting and errors, noise, clock)."""
-    errors = ImuErrors.draw(sensors, rng)
-    accel, gyro = exact_signals(body, errors.mounting, sensors.rate_hz)
-    accel, gyro = measure(accel, gyro, errors, sensors, rng)
-    clock = DeviceClock.draw(link, rng)
-    return WaistImu(agent_id, sensor_id(agent_id), clock, errors, clock.stamp_ns(time_s), accel.astype(np.float32),
-                    gyro.astype(np.float32))
+    pitch, mounting = draw_mounting(sensors, rng)
+    imu = Imu.draw(imu_triads(sensors), rng)
+    accel, gyro = exact_signals(body, mounting, sensors.rate_hz)
+    reported = imu.measure({"accel": accel, "gyro": gyro}, rng)
+    clock = DeviceClock.draw(rng, start_unix_s=link.start_unix_s, offset_ms=link.clock_offset_ms,
+                             drift_ppm=link.clock_drift_ppm)
+    return WaistImu(agent_id, sensor_id(agent_id), clock, pitch, mounting, imu, clock.stamp_ns(time_s),
+                    reported["accel"].astype(np.float32), reported["gyro"].astype(np.float32))
 
 
 def sensor_id(agent_id: str) -> str:

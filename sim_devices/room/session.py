@@ -181,10 +181,10 @@ def _describe(motion: Motion, imus: list[WaistImu], extras: list[PersonPath], pa
         agents.append(Agent(person.person_id, kind=AgentKind.PEDESTRIAN, sensors=(sensor,),
                             start_x_m=float(body.pelvis_m[0, 0]), start_y_m=float(body.pelvis_m[0, 1]),
                             start_heading_rad=heading))
-    devices = {imu.sensor_id: {"clock_offset_s": imu.clock.offset_s, "clock_drift": imu.clock.drift,
-                               "belt_pitch_deg": imu.errors.belt_pitch_deg,
-                               "accel_bias_g": imu.errors.accel_bias_g.tolist(),
-                               "gyro_bias_dps": imu.errors.gyro_bias_dps.tolist()} for imu in imus}
+    devices = {waist.sensor_id: {"clock_offset_s": waist.clock.offset_s, "clock_drift": waist.clock.drift,
+                                 "belt_pitch_deg": waist.belt_pitch_deg,
+                                 "accel_bias_g": waist.imu.errors["accel"].bias.tolist(),
+                                 "gyro_bias_dps": waist.imu.errors["gyro"].bias.tolist()} for waist in imus}
     source: dict[str, Any] = {
         "generator": "sim_devices.room", "seed": seed, "people": len(motion.persons), "extra_people": len(extras),
         "duration_s": float(duration_s), "preset": PRESET if tracker is not None else None,

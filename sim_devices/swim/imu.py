@@ -10,11 +10,11 @@ of the sensor position (sampled at the IMU rate; every curve is smooth, so this 
 acceleration to well under the noise) plus g up, resolved in the sensor frame, in g; angular rate
 = vee(R_k^T (R_k+1 - R_k-1) / 2 dt) in the sensor frame, in deg/s.
 
-Errors (per sensor, drawn once per set): per-axis scale and cross-axis sensitivity (one 3 x 3
-matrix), turn-on biases, bias random walks, white noise (density x sqrt(rate / 2)); then the ADC
-clips at the range and rounds to its 16-bit step, and the output is rounded to the TSND121's units
-(0.1 mg, 0.01 deg/s). The order is the physics: mounted, sensed (scale, cross-axis, bias, noise),
-then digitised.
+Errors (`sim_devices.devices.imu`, per sensor, drawn once per set): per-axis scale and cross-axis
+sensitivity (one 3 x 3 matrix), turn-on biases, bias random walks, white noise (density x
+sqrt(rate / 2)); then the ADC clips at the range and rounds to its 16-bit step, and the output is
+rounded to the TSND121's units (0.1 mg, 0.01 deg/s). The order is the physics: mounted, sensed
+(scale, cross-axis, bias, noise), then digitised.
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from protocol.session import Mount
+from sim_devices.common import angular_rate
+from sim_devices.devices.imu import Triad, accel_triad, gyro_triad
 from sim_devices.swim.attitude import Angles, rotation
 from sim_devices.swim.params import MountParams, SensorParams, SwimParams
 from sim_devices.swim.timeline import Timeline
@@ -86,54 +88,9 @@ def _second_difference(values: np.ndarray) -> np.ndarray:
     return out
 
 
-def angular_rate(rotations: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Body-frame angular velocity (rad/s) of (n, 3, 3) body-to-world rotations sampled at `rate_hz`."""
-    change = np.empty_like(rotations)
-    change[1:-1] = rotations[2:] - rotations[:-2]
-    change[0], change[-1] = 2.0 * (rotations[1] - rotations[0]), 2.0 * (rotations[-1] - rotations[-2])
-    w = np.einsum("nji,njk->nik", rotations, change) * (rate_hz / 2.0)
-    return np.stack([w[:, 2, 1] - w[:, 1, 2], w[:, 0, 2] - w[:, 2, 0], w[:, 1, 0] - w[:, 0, 1]], axis=1) / 2.0
-
-
-@dataclass(frozen=True)
-class ImuErrors:
-    """The errors of one sensor, drawn once per set."""
-
-    accel_matrix: np.ndarray  # (3, 3) scale on the diagonal, cross-axis off it
-    accel_bias_g: np.ndarray
-    gyro_matrix: np.ndarray
-    gyro_bias_dps: np.ndarray
-
-    @classmethod
-    def draw(cls, sensors: SensorParams, rng: np.random.Generator) -> "ImuErrors":
-        def matrix(scale_sd: float) -> np.ndarray:
-            cross = rng.normal(0.0, sensors.cross_axis, (3, 3))
-            np.fill_diagonal(cross, 0.0)
-            return np.diag(1.0 + rng.normal(0.0, scale_sd, 3)) + cross
-
-        accel_matrix = matrix(sensors.accel_scale_error)
-        accel_bias = rng.normal(0.0, sensors.accel_bias_g, 3)
-        gyro_matrix = matrix(sensors.gyro_scale_error)
-        return cls(accel_matrix, accel_bias, gyro_matrix, rng.normal(0.0, sensors.gyro_bias_dps, 3))
-
-
-def measure(accel_g: np.ndarray, gyro_dps: np.ndarray, errors: ImuErrors, sensors: SensorParams,
-            rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Reported (accel g, gyro deg/s), (n, 3) each, from exact sensor-frame signals (draw order fixed)."""
-    n, rate = len(accel_g), sensors.rate_hz
-    band = math.sqrt(rate / 2.0)  # white noise over the Nyquist band
-    accel = accel_g @ errors.accel_matrix.T + errors.accel_bias_g
-    accel += np.cumsum(rng.normal(0.0, sensors.accel_bias_walk_g_per_sqrt_s / math.sqrt(rate), (n, 3)), axis=0)
-    accel += rng.normal(0.0, sensors.accel_noise_g_per_sqrt_hz * band, (n, 3))
-    gyro = gyro_dps @ errors.gyro_matrix.T + errors.gyro_bias_dps
-    gyro += np.cumsum(rng.normal(0.0, sensors.gyro_bias_walk_dps_per_sqrt_s / math.sqrt(rate), (n, 3)), axis=0)
-    gyro += rng.normal(0.0, sensors.gyro_noise_dps_per_sqrt_hz * band, (n, 3))
-    return (digitise(accel, sensors.accel_range_g, sensors.adc_bits, sensors.accel_unit_g),
-            digitise(gyro, sensors.gyro_range_dps, sensors.adc_bits, sensors.gyro_unit_dps))
-
-
-def digitise(values: np.ndarray, full_scale: float, bits: int, unit: float) -> np.ndarray:
-    """Clip to +-full_scale, round to the ADC step, then to the output unit."""
-    step = full_scale / 2 ** (bits - 1)
-    adc = np.clip(np.round(values / step) * step, -full_scale, full_scale)
-    return np.round(adc / unit) * unit
+def imu_triads(sensors: SensorParams) -> dict[str, Triad]:
+    """The TSND121's accelerometer, then gyroscope (the order their errors are drawn and sensed in):
+    cross-axis sensitivity, an accelerometer bias walk, and the output rounded to the device's units."""
+    return {"accel": accel_triad(sensors, walk_g_per_sqrt_s=sensors.accel_bias_walk_g_per_sqrt_s,
+                                 cross_axis_sd=sensors.cross_axis, unit_g=sensors.accel_unit_g),
+            "gyro": gyro_triad(sensors, cross_axis_sd=sensors.cross_axis, unit_dps=sensors.gyro_unit_dps)}

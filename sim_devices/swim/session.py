@@ -154,8 +154,8 @@ def simulate_swim(output: Path, seed: int = 1, swimmers: int = 4, lengths: int =
                                                      plan.agent_id, swimmer_seed=plan.swimmer_seed,
                                                      start_y_m=plan.start_y_m)
         devices = {s.sensor_id: {"mount": s.mount.value, "tilt_deg": detail.tilt_deg[s.mount],
-                                 "accel_bias_g": detail.errors[s.mount].accel_bias_g.tolist(),
-                                 "gyro_bias_dps": detail.errors[s.mount].gyro_bias_dps.tolist()} for s in streams}
+                                 "accel_bias_g": detail.imus[s.mount].errors["accel"].bias.tolist(),
+                                 "gyro_bias_dps": detail.imus[s.mount].errors["gyro"].bias.tolist()} for s in streams}
         # float32 is what an ImuBatch carries; keeping it halves the memory of a default session
         streams = [dataclasses.replace(s, accel_g=s.accel_g.astype(np.float32), gyro_dps=s.gyro_dps.astype(np.float32))
                    for s in streams]

@@ -20,8 +20,10 @@ import numpy as np
 from protocol.errors import ConfigError
 from protocol.session import Mount, Route
 from sim_devices.common import small_rotation
+from sim_devices.devices.clock import DeviceClock
+from sim_devices.devices.imu import Imu
 from sim_devices.swim.attitude import segment_angles
-from sim_devices.swim.imu import ImuErrors, SensorMotion, measure, mount_group, mount_params, sensor_motion
+from sim_devices.swim.imu import SensorMotion, imu_triads, mount_group, mount_params, sensor_motion
 from sim_devices.swim.params import STROKES, SwimParams, check
 from sim_devices.swim.swimmer import Swimmer, draw_swimmer, swimmer_rngs
 from sim_devices.swim.timeline import Timeline, build_timeline
@@ -68,7 +70,7 @@ class SetDetail:
     swimmer: Swimmer
     timeline: Timeline
     motions: dict[Mount, SensorMotion]
-    errors: dict[Mount, ImuErrors]
+    imus: dict[Mount, Imu]  # each sensor's drawn errors
     tilt_deg: dict[Mount, float]
 
 
@@ -98,19 +100,20 @@ def simulate_set_detail(stroke: str, route: Route, mounts: Sequence[Mount], leng
     timeline = build_timeline(route, lengths, swimmer, params, _rng(seed, 2), start_y_m)
     angles = segment_angles(timeline, swimmer, params, _rng(seed, 3))
     epoch_ns = params.link.start_unix_s * 1_000_000_000
-    time_ns = epoch_ns + np.round(timeline.time_s * 1e9).astype(np.int64)
-    streams, motions, errors, tilts = [], {}, {}, {}
+    time_ns = DeviceClock(epoch_ns).stamp_ns(timeline.time_s)  # device clock = true time
+    streams, motions, imus, tilts = [], {}, {}, {}
     for mount in mounts:
         rng = _rng(seed, 4, list(Mount).index(mount))
         mounting = small_rotation(rng, mount_params(params, mount).misalignment_deg)
         tilt = swimmer.tilt_deg[mount_group(mount)]
         motion = sensor_motion(timeline, angles, mount, tilt, mounting, params)
-        drawn = ImuErrors.draw(params.sensors, rng)
-        accel, gyro = measure(motion.accel_g, motion.gyro_dps, drawn, params.sensors, rng)
-        streams.append(SensorStream(f"{agent_id}-{SENSOR_SUFFIX[mount]}", mount, time_ns, accel, gyro))
-        motions[mount], errors[mount], tilts[mount] = motion, drawn, tilt
+        imu = Imu.draw(imu_triads(params.sensors), rng)
+        reported = imu.measure({"accel": motion.accel_g, "gyro": motion.gyro_dps}, rng)
+        streams.append(SensorStream(f"{agent_id}-{SENSOR_SUFFIX[mount]}", mount, time_ns, reported["accel"],
+                                    reported["gyro"]))
+        motions[mount], imus[mount], tilts[mount] = motion, imu, tilt
     truth = _truth(stroke, route, timeline, params, epoch_ns)
-    return streams, truth, SetDetail(swimmer, timeline, motions, errors, tilts)
+    return streams, truth, SetDetail(swimmer, timeline, motions, imus, tilts)
 
 
 def _rng(seed: int, *key: int) -> np.random.Generator:

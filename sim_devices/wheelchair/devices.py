@@ -4,9 +4,12 @@ Per chair: the measured wheel diameter (0.61 m, or 0.67 m for round(`chair.large
 * players) chairs, like the paper's players), each wheel's effective rolling diameter
 (`wheels.diameter_bias` +- `diameter_spread`), and a camber in [`camber_min_deg`, `camber_max_deg`].
 Per sensor: error-free signal (`kinematics`), impacts and vibration (`impacts`), then the sensor's
-errors and its clock (`imu_errors`); the seat also gets its magnetometer (`magnetic`). Wheel
-sensors have no magnetometer stream: on a spinning wheel beside steel spokes and hub its reading
-is dominated by the wheel's own rotation and iron, and the estimator takes heading from the seat.
+errors (`sim_devices.devices.imu`: a mounting misalignment, the gyroscope's then the
+accelerometer's scale and bias; per sample gyro bias walk and noise, accelerometer noise,
+saturation, quantisation) and its clock (`sim_devices.devices.clock`: offset, drift, jitter); the
+seat also gets its magnetometer (`magnetic`). Wheel sensors have no magnetometer stream: on a
+spinning wheel beside steel spokes and hub its reading is dominated by the wheel's own rotation and
+iron, and the estimator takes heading from the seat.
 """
 
 from __future__ import annotations
@@ -16,12 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim_devices.common import small_rotation
+from sim_devices.devices.clock import DeviceClock
+from sim_devices.devices.imu import Imu, Triad, accel_triad, gyro_triad
 from sim_devices.wheelchair.impacts import Impact, add_impacts, add_vibration
-from sim_devices.wheelchair.imu_errors import DeviceClock, ImuErrors, measure
 from sim_devices.wheelchair.kinematics import ChairBuild, seat_imu, wheel_imu
 from sim_devices.wheelchair.magnetic import CourtField, seat_magnetometer
 from sim_devices.wheelchair.motion import Motion
-from sim_devices.wheelchair.params import SimParams
+from sim_devices.wheelchair.params import SensorParams, SimParams
 
 LEFT, RIGHT = 1, -1
 
@@ -33,7 +38,7 @@ class ImuStream:
     agent_id: str
     sensor_id: str
     clock: DeviceClock
-    errors: ImuErrors
+    imu: Imu  # its mounting and drawn errors
     stamps_ns: np.ndarray  # (steps,) int64, device clock
     gyro_dps: np.ndarray  # (steps, 3) float32
     accel_g: np.ndarray
@@ -77,7 +82,7 @@ def chair_streams(motion: Motion, agent: int, build: ChairBuild, field: CourtFie
     add_vibration(accel, speed, params, seat_rng)
     seat = _finish(build.agent_id, seat_id, motion, gyro, accel, params, seat_rng)
     field_ut = field.field_ut(motion.x_m[:, agent], motion.y_m[:, agent])
-    seat.mag_gauss = seat_magnetometer(field_ut, motion.heading_rad[:, agent], seat.errors.mounting,
+    seat.mag_gauss = seat_magnetometer(field_ut, motion.heading_rad[:, agent], seat.imu.mounting,
                                        params.magnetic, seat_rng).astype(np.float32)
     streams.append(seat)
     return streams
@@ -85,9 +90,19 @@ def chair_streams(motion: Motion, agent: int, build: ChairBuild, field: CourtFie
 
 def _finish(agent: str, sensor: str, motion: Motion, gyro: np.ndarray, accel: np.ndarray, params: SimParams,
             rng: np.random.Generator) -> ImuStream:
-    """Apply one sensor's errors and clock to its error-free signals."""
-    errors = ImuErrors.draw(params.sensors, rng)
-    gyro, accel = measure(gyro, accel, errors, params.sensors, rng)
-    clock = DeviceClock.draw(params.clock, rng)
+    """Apply one sensor's errors and clock to its error-free signals (draw order: mounting, errors,
+    noise, clock, jitter)."""
+    mounting = small_rotation(rng, params.sensors.misalignment_deg)
+    imu = Imu.draw(imu_triads(params.sensors), rng, mounting)
+    reported = imu.measure({"gyro": gyro, "accel": accel}, rng)
+    clocks = params.clock
+    clock = DeviceClock.draw(rng, start_unix_s=clocks.start_unix_s, offset_ms=clocks.offset_ms,
+                             drift_ppm=clocks.drift_ppm, jitter_ms=clocks.jitter_ms)
     stamps = clock.stamp_ns(motion.time_s, rng, period_s=1.0 / params.sensors.rate_hz)
-    return ImuStream(agent, sensor, clock, errors, stamps, gyro.astype(np.float32), accel.astype(np.float32), None)
+    return ImuStream(agent, sensor, clock, imu, stamps, reported["gyro"].astype(np.float32),
+                     reported["accel"].astype(np.float32), None)
+
+
+def imu_triads(sensors: SensorParams) -> dict[str, Triad]:
+    """The chair IMU's gyroscope, then accelerometer (the order their errors are drawn and sensed in)."""
+    return {"gyro": gyro_triad(sensors), "accel": accel_triad(sensors)}

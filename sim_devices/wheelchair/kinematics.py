@@ -23,7 +23,7 @@ the yaw terms of the hub's lateral offset), resolved on a, b, n and rotated by p
 centripetal and tangential terms of a sensor centre `chair.wheel_sensor_offset_m` off the axis.
 
 Seat. The seat IMU sits at the chair's reference point (axle midpoint), sensor frame = chair
-frame (its mounting tilt is the sensor misalignment of `imu_errors`): gyro (0, 0, w), accel
+frame (its mounting tilt is the sensor misalignment drawn in `devices`): gyro (0, 0, w), accel
 (a_forward, a_left, g) / g.
 """
 

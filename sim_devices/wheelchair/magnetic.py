@@ -22,9 +22,9 @@ import math
 
 import numpy as np
 
-from sim_devices.wheelchair.imu_errors import MAG_LSB_UT
 from sim_devices.wheelchair.params import MagneticParams
 
+MAG_LSB_UT = 0.15  # AK8963 16-bit output step (datasheet), also AK09916 in the ICM-20948
 WAVES = 32  # plane waves per axis of the disturbance field
 WAVELENGTH_SPREAD = 0.4  # log-normal SD of the wavelengths
 UT_PER_GAUSS = 100.0

@@ -192,8 +192,8 @@ def _describe(builds: list[ChairBuild], motion: Motion, streams: list[ImuStream]
                           "right_diameter_m": b.right_diameter_m, "top_speed_mps": float(motion.top_speed_mps[i])}
              for i, b in enumerate(builds)}
     devices = {s.sensor_id: {"clock_offset_s": s.clock.offset_s, "clock_drift": s.clock.drift,
-                             "gyro_bias_dps": s.errors.gyro_bias_dps.tolist(),
-                             "accel_bias_g": s.errors.accel_bias_g.tolist()} for s in streams}
+                             "gyro_bias_dps": s.imu.errors["gyro"].bias.tolist(),
+                             "accel_bias_g": s.imu.errors["accel"].bias.tolist()} for s in streams}
     source = {"generator": "sim_devices.wheelchair", "seed": seed, "players": len(builds),
               "duration_s": float(duration_s), "params": dataclasses.asdict(params),
               "truth": {"chairs": truth, "devices": devices}}

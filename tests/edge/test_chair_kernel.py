@@ -19,19 +19,18 @@ from edge.chair.kernel import (FLAGS, SAMPLE_WIDTH, STATE_SIZE, V_ACCEL, V_HAS_M
 from protocol.session_log import read_session
 from reckon.evaluation.inputs import build_inputs
 from reckon.evaluation.reckon_run import merged_samples
-from sim_devices.wheelchair import simulate
+from support.games import Game
 
 # a magnetometer aid that trusts its fit early and gates hard: rejections and re-learning north
 STRICT_MAG = dict(mag_fit_min_points=10, mag_fit_min_spread=0.3, mag_gate_chi2=0.05, mag_recover_rejections=3)
+GAME = Game(players=2, duration_s=30.0, seed=7)
 
 
 @pytest.fixture(scope="module")
-def game(tmp_path_factory):
-    """Per chair of a 2-player 30 s simulated game: (settings, start state, merged samples after the first)."""
-    path = tmp_path_factory.mktemp("kernel") / "game.mcap"
-    simulate(players=2, duration_s=30.0, seed=7, output=path)
+def chairs(game):
+    """Per chair of the 2-player 30 s simulated game: (settings, start state, merged samples after the first)."""
     chairs = []
-    for agent in build_inputs(read_session(path)).agents:
+    for agent in build_inputs(read_session(game)).agents:
         samples = merged_samples(agent)
         chair = ChairSettings(wheel_diameter_m=agent.agent.wheel_diameter_m, camber_deg=agent.agent.camber_deg)
         first = start(chair, samples[0], agent.agent.start_x_m, agent.agent.start_y_m, agent.agent.start_heading_rad)
@@ -96,9 +95,9 @@ def assert_same_state(kernel: ChairState, expected: ChairState) -> None:
 
 
 @pytest.mark.parametrize("overrides", [{}, STRICT_MAG], ids=["default", "strict-mag"])
-def test_kernel_steps_as_the_reference_does(game, overrides):
+def test_kernel_steps_as_the_reference_does(chairs, overrides):
     seen, relearned_north = Flag.NONE, 0
-    for chair, first, samples in game:
+    for chair, first, samples in chairs:
         chair = replace(chair, **overrides)
         samples = with_mishaps(samples)
         expected, expected_flags, relearned = reference(chair, first, samples)
@@ -120,8 +119,8 @@ def test_kernel_steps_as_the_reference_does(game, overrides):
 
 @settings(max_examples=30, deadline=None)
 @given(st.lists(st.integers(0, 6000), max_size=6))
-def test_any_split_into_batches_gives_the_same_result(game, cuts):
-    chair, first, samples = game[1]
+def test_any_split_into_batches_gives_the_same_result(chairs, cuts):
+    chair, first, samples = chairs[1]
     times, values = pack_samples(with_mishaps(samples))
     settings_vector = pack_settings(chair)
     whole, whole_flags = run_batch(settings_vector, pack_state(first), times, values)
@@ -134,8 +133,8 @@ def test_any_split_into_batches_gives_the_same_result(game, cuts):
     np.testing.assert_array_equal(np.concatenate(flags), whole_flags)
 
 
-def test_packing_keeps_every_field(game):
-    chair, first, samples = game[0]
+def test_packing_keeps_every_field(chairs):
+    chair, first, samples = chairs[0]
     state = reference(chair, first, samples)[0]
     assert state.mag.ready and state.mag.fit.any()  # a state with everything in use
     for original in (state, replace(state, time_ns=-(2**62) + 12345, flags=Flag.GAP | Flag.IMPACT, in_impact=True)):
@@ -166,8 +165,8 @@ def test_samples_without_magnetometer_pack_as_absent():
     assert pack_samples([])[1].shape == (0, SAMPLE_WIDTH)
 
 
-def test_an_empty_batch_or_a_backwards_one_changes_nothing_but_the_flag(game):
-    chair, first, samples = game[0]
+def test_an_empty_batch_or_a_backwards_one_changes_nothing_but_the_flag(chairs):
+    chair, first, samples = chairs[0]
     vector = pack_state(first)
     settings_vector = pack_settings(chair)
     same, flags = run_batch(settings_vector, vector, np.zeros(0, np.int64), np.zeros((0, SAMPLE_WIDTH)))

@@ -12,26 +12,23 @@ import numpy as np
 import pytest
 
 from edge.chair.edge import ChairEdge
-from edge.health import DEVICE_RANGES, DeviceHealth, HealthSettings
+from edge.decoders import ximu3
+from edge.health import DeviceHealth, HealthSettings
 from protocol import messages
 from protocol.errors import ConfigError
 from protocol.session_log import LogMessages, read_session
 from reckon.transport.bus import zenoh_config
-from reckon.tools.demo import free_endpoint
-from reckon.processes.edge import SerialSources, mcap_source, run_edge
+from edge.sources.mcap import mcap_source
+from edge.sources.serial import SerialSources
+from reckon.processes.edge import run_edge
 from reckon.transport.record import record
 from sim_devices.devices.ximu3 import SerialDevice
-from sim_devices.wheelchair import simulate
+from support.games import Game
+from support.waits import wait_until
 
+GAME = Game(players=1, duration_s=12.0, seed=4)
 WAIT_S = 30.0
 RANGES = (16.0, 1500.0)  # the simulated sensor's full scales (sim_devices/wheelchair/params.py)
-
-
-@pytest.fixture(scope="module")
-def game(tmp_path_factory):
-    path = tmp_path_factory.mktemp("faults") / "game.mcap"
-    simulate(players=1, duration_s=12.0, seed=4, output=path)
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -202,7 +199,7 @@ def test_stuck_and_saturated_samples_are_flagged_and_counted(game, batches):
 
 
 def test_a_gyro_clipped_at_full_scale_is_saturated_not_stuck():
-    health = DeviceHealth("a", ranges=DEVICE_RANGES["ximu3"])
+    health = DeviceHealth("a", ranges=ximu3.DEVICE.full_scale)
     batch = messages.imu_batch("a", "s", 0, np.arange(200, dtype=np.int64) * 5_000_000,
                                np.tile([0.01, 0.02, 1.0], (200, 1)) + np.random.default_rng(1).normal(0, 1e-3, (200, 3)),
                                np.tile([2000.0, 0.0, 0.0], (200, 1)) + [0, 0.1, 0.1] * np.random.default_rng(2).normal(
@@ -275,11 +272,11 @@ def test_serial_device_unplugged_and_replugged_elsewhere_is_reopened(tmp_path):
         iterator = iter(sources)
         take(200)  # every byte of the first device read before it goes (a pty drops what is left)
         first.close()  # unplugged: the reader sees EIO
-        assert until(lambda: not sources.link("seat")[0])
+        wait_until(lambda: not sources.link("seat")[0], WAIT_S, "the source to see the unplugged device go")
         assert "disconnected" in health.status("seat", time.time_ns(), connected=False).flags
         second.open()
         os.replace(_symlink(tmp_path, second.port), link)  # re-pointed, as udev does
-        assert until(lambda: sources.link("seat")[0])
+        wait_until(lambda: sources.link("seat")[0], WAIT_S, "the source to reopen the device at its new pty")
         second.play()
         take(n)
         connected, reconnects, battery = sources.link("seat")
@@ -298,16 +295,6 @@ def test_serial_device_unplugged_and_replugged_elsewhere_is_reopened(tmp_path):
     assert status.reconnects == 1 and status.clock_jumps == 1 and status.samples == n
 
 
-def until(condition, timeout_s=WAIT_S):
-    """Wait for `condition` (a reader thread's state), bounded; True once it holds."""
-    deadline, tick = time.monotonic() + timeout_s, threading.Event()
-    while not condition():
-        if time.monotonic() > deadline:
-            return False
-        tick.wait(0.005)
-    return True
-
-
 def _symlink(folder, target):
     path = folder / "new-link"
     os.symlink(target, path)
@@ -317,7 +304,7 @@ def _symlink(folder, target):
 # -- the edge process: DeviceStatus on the bus ------------------------------------------------------
 
 
-def test_edge_publishes_device_status_with_the_faults_counted(game, batches, tmp_path, caplog):
+def test_edge_publishes_device_status_with_the_faults_counted(game, batches, free_endpoint, tmp_path, caplog):
     stream = []
     for index, batch in enumerate(batches):
         stream.append(batch)
@@ -334,6 +321,7 @@ def test_edge_publishes_device_status_with_the_faults_counted(game, batches, tmp
                        wait_for=1)
     stop.set()
     recorder.join(WAIT_S)
+    assert not recorder.is_alive()
     statuses, imu = {}, 0
     for _, _, message in LogMessages(output, lambda topic, name: name in ("DeviceStatus", "ImuBatch")):
         if messages.type_name(message) == "DeviceStatus":

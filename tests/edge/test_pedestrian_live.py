@@ -12,30 +12,18 @@ from pathlib import Path
 
 from protocol import keys
 from protocol.session import load_toml
-from protocol.stand_code import write_key
 from reckon.transport.bus import Subscription, open_session, zenoh_config
-from reckon.tools.demo import free_endpoint
 from reckon.processes.edge import run_edge
 from reckon.processes.hub import run_hub
 from edge.sources.phone.server import PhoneSource
-from test_phone_browser import ARGS, CHROMIUM, FRAMES_PER_CODE, browser_module, code_frame, write_y4m  # noqa: F401
-from test_phone_server import KEY, entrance_code
+from support.browser import CHROMIUM
+from support.phone import ARGS, FRAMES_PER_CODE, code_frame, entrance_code, make_venue, write_y4m
 
 WAIT_S = 60.0
 WALK_MS = 6000
 CADENCE_HZ = 1.8
-# The entrance stand faces south (-y) at the top of a 4 m wide, 40 m long corridor.
-VENUE_TOML = """\
-[venue]
-name = "hall"
-stands = [{id = "entrance", x_m = 3.3, y_m = 33.55, heading_deg = -90.0}]
-floor_plan = [[[[1.3, -2.0], [5.3, -2.0], [5.3, 36.0], [1.3, 36.0]]]]
-
-[[agents]]
-id = "walker"
-kind = "pedestrian"
-sensors = [{id = "phone", mount = "hand", rate_hz = 100.0}]
-"""
+# The entrance stand (support/phone.py's hall) faces south (-y) at the top of a 4 m wide, 40 m long corridor.
+CORRIDOR = [[[[1.3, -2.0], [5.3, -2.0], [5.3, 36.0], [1.3, 36.0]]]]
 # A phone held flat walking: gravity on +z (W3C: a phone face up at rest reads +9.8), a vertical
 # bounce of +-2.5 m/s^2 at the step rate, paced by the page's clock at about 100 Hz.
 WALK = """async ([durationMs, cadenceHz]) => {
@@ -54,10 +42,8 @@ WALK = """async ([durationMs, cadenceHz]) => {
 }"""
 
 
-def test_scan_walk_and_see_the_position_on_the_hub(browser_module, tmp_path: Path):
-    venue_toml = tmp_path / "hall.toml"
-    venue_toml.write_text(VENUE_TOML)
-    write_key(tmp_path / "hall.standkey", KEY)
+def test_scan_walk_and_see_the_position_on_the_hub(browser_module, free_endpoint, tmp_path: Path):
+    venue_toml = make_venue(tmp_path, floor_plan=CORRIDOR)
     session = load_toml(venue_toml)
     endpoint = free_endpoint()
     stop_hub, stop_edge, hub_ready = threading.Event(), threading.Event(), threading.Event()

@@ -1,33 +1,27 @@
 """The phone page (edge/sources/phone/page/) end to end in headless Chromium: synthetic DeviceMotion events
 and a fake camera showing stand codes (a genuine one, then a tampered one) go through the page,
-the WebSocket and the server, and come out of the PhoneSource as ImuBatch and StandScan.
+the WebSocket and the server, and come out of the PhoneSource as ImuBatch and StandScan. The
+camera's frames go to the edge, which reads the codes (`?scan=frames`, whatever the browser
+has); a stand-in BarcodeDetector checks the page's other path, a code read on the phone.
 Skipped when Debian's chromium is not installed (never downloads a browser)."""
 
 from __future__ import annotations
 
-import io
+import json
 import queue
-import shutil
 import threading
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pytest
-import segno
-from PIL import Image
 
 from protocol.session import load_toml
 from protocol.messages import STANDARD_GRAVITY_MS2
 from edge.sources.phone.server import PhoneSource
-from test_phone_server import TIMEOUT_S, batch_times, entrance_code, make_venue
+from support.browser import CHROMIUM
+from support.phone import (ARGS, FRAMES_PER_CODE, TIMEOUT_S, batch_times, code_frame, entrance_code, make_venue,
+                           write_y4m)
 
-CHROMIUM = "/usr/bin/chromium"
-FRAME_W, FRAME_H = 480, 360
-FRAMES_PER_CODE = 10  # at 10 fps each code is in view for 1 s, several of the page's 200 ms scans
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync",
-        "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream"]
 SAMPLES = 60
 
 
@@ -36,33 +30,6 @@ def tampered(text: str) -> str:
     fields = text.split(":")
     fields[3] = str(int(fields[3]) + 1)
     return ":".join(fields)
-
-
-def code_frame(text: str) -> np.ndarray:
-    """A grey camera frame with the code in the middle, 7 px per module (as a phone ~20 cm away)."""
-    buffer = io.BytesIO()
-    segno.make(text, error="q", mode="byte", micro=False).save(buffer, kind="png", scale=7, border=4)
-    code = Image.open(buffer).convert("L")
-    frame = Image.new("L", (FRAME_W, FRAME_H), 200)
-    frame.paste(code, ((FRAME_W - code.width) // 2, (FRAME_H - code.height) // 2))
-    return np.asarray(frame)
-
-
-def write_y4m(path: Path, frames: list[np.ndarray]) -> Path:
-    """Frames as a 4:2:0 YUV4MPEG2 file (grey: chroma 128), what Chromium's fake camera plays."""
-    with path.open("wb") as file:
-        file.write(f"YUV4MPEG2 W{FRAME_W} H{FRAME_H} F10:1 Ip A1:1 C420jpeg\n".encode("ascii"))
-        chroma = bytes([128]) * (FRAME_W // 2 * FRAME_H // 2)
-        for luma in frames:
-            file.write(b"FRAME\n" + luma.astype(np.uint8).tobytes() + chroma + chroma)
-    return path
-
-
-@pytest.fixture(scope="module")
-def browser_module():
-    if shutil.which("chromium") is None and not Path(CHROMIUM).exists():
-        pytest.skip("Debian's chromium is not installed (apt-get install -y chromium)")
-    return pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
 
 
 def take_until(source: PhoneSource, done) -> list[Any]:
@@ -101,7 +68,7 @@ def test_page_streams_motion_and_scans_codes(browser_module, tmp_path: Path):
                                              args=ARGS + [f"--use-file-for-fake-video-capture={camera}"])
         try:
             page = browser.new_context(ignore_https_errors=True).new_page()
-            page.goto(f"https://127.0.0.1:{source.port}/")
+            page.goto(f"https://127.0.0.1:{source.port}/?scan=frames")
             page.wait_for_function("document.body.dataset.state === 'connected'")
             page.click("#start")
             page.wait_for_function("document.body.dataset.started === 'yes'")
@@ -111,6 +78,7 @@ def test_page_streams_motion_and_scans_codes(browser_module, tmp_path: Path):
                              and {m.accepted for m in got if m.DESCRIPTOR.name == "StandScan"} == {True, False})
             page.wait_for_function("document.body.dataset.lastScan !== undefined")
             shown = page.text_content("#scan")
+            scan_path, scanning = page.evaluate("document.body.dataset.scanPath"), page.text_content("#scanning")
         finally:
             browser.close()
         stop.set()
@@ -128,3 +96,36 @@ def test_page_streams_motion_and_scans_codes(browser_module, tmp_path: Path):
     assert (accepted.stand_id, accepted.x_m, accepted.y_m, accepted.payload) == ("entrance", 3.3, 33.55, genuine)
     assert refused.payload == tampered(genuine) and refused.reason.startswith("integrity code does not match")
     assert shown.startswith("accepted: stand entrance") or shown.startswith("refused: integrity code")
+    assert scan_path == "frames" and scanning.startswith("frames sent to the edge: ")
+
+
+# A BarcodeDetector that reads the given text in every look, as Chrome on Android has one.
+FAKE_DETECTOR = """(text) => {
+  window.BarcodeDetector = class {
+    static async getSupportedFormats() { return ["qr_code"]; }
+    async detect() { return [{rawValue: text, format: "qr_code"}]; }
+  };
+}"""
+
+
+def test_a_browser_that_reads_codes_itself_sends_the_text(browser_module, tmp_path: Path):
+    venue_toml = make_venue(tmp_path)
+    stop = threading.Event()
+    with PhoneSource("phone://127.0.0.1:0", load_toml(venue_toml), "walker", "phone", stop,
+                     venue_toml=venue_toml) as source, browser_module.sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=ARGS)
+        try:
+            context = browser.new_context(ignore_https_errors=True)
+            context.add_init_script(script=f"({FAKE_DETECTOR})({json.dumps(entrance_code())})")
+            page = context.new_page()
+            page.goto(f"https://127.0.0.1:{source.port}/")
+            page.wait_for_function("document.body.dataset.state === 'connected'")
+            page.click("#start")
+            out = take_until(source, lambda got: any(m.DESCRIPTOR.name == "StandScan" for m in got))
+            page.wait_for_function("document.body.dataset.lastScan === 'accepted'")
+            scan_path, scanning = page.evaluate("document.body.dataset.scanPath"), page.text_content("#scanning")
+        finally:
+            browser.close()
+        stop.set()
+    assert (scan_path, scanning) == ("detector", "read on this phone")
+    assert [(m.accepted, m.stand_id, m.payload) for m in out] == [(True, "entrance", entrance_code())]

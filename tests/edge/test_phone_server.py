@@ -7,8 +7,6 @@ from __future__ import annotations
 import asyncio
 import json
 import math
-import queue
-import ssl
 import threading
 from pathlib import Path
 from typing import Any
@@ -19,72 +17,11 @@ import pytest
 from cryptography import x509
 
 from protocol.errors import ConfigError
-from protocol.session import Stand, load_toml
-from protocol.stand_code import encode, write_key
-from reckon.processes.edge import open_sources
+from protocol.session import load_toml
+from edge.sources.registry import open_sources
 from edge.sources.phone.server import PhoneSource, parse_phone_url
 from edge.sources.phone.tls import ensure_certificate
-
-KEY = bytes(range(32))
-VENUE_TOML = """\
-[venue]
-name = "hall"
-stands = [{id = "entrance", x_m = 3.3, y_m = 33.55, heading_deg = -90.0}]
-
-[[agents]]
-id = "walker"
-kind = "pedestrian"
-sensors = [{id = "phone", mount = "hand", rate_hz = 100.0}]
-"""
-T0_NS = 1_764_000_000_000_000_000
-ENTRANCE = Stand("entrance", 3.3, 33.55, heading_deg=-90.0)  # as in VENUE_TOML
-TIMEOUT_S = 20.0
-
-
-def make_venue(folder: Path) -> Path:
-    path = folder / "hall.toml"
-    path.write_text(VENUE_TOML)
-    write_key(folder / "hall.standkey", KEY)
-    return path
-
-
-def entrance_code() -> str:
-    return encode(ENTRANCE, "hall", KEY)
-
-
-@pytest.fixture
-def venue_toml(tmp_path: Path) -> Path:
-    return make_venue(tmp_path)
-
-
-@pytest.fixture
-def phone(venue_toml: Path):
-    """A running PhoneSource on an ephemeral port, stopped at the end."""
-    stop = threading.Event()
-    source = PhoneSource("phone://127.0.0.1:0?http_port=0", load_toml(venue_toml), "walker", "phone", stop,
-                         venue_toml=venue_toml)
-    with source:
-        yield source
-    stop.set()
-
-
-def take(source: PhoneSource, count: int) -> list[Any]:
-    """The next `count` messages out of the source (fails after TIMEOUT_S: no sleeps)."""
-    out = []
-    for _ in range(count):
-        try:
-            out.append(source.queue.get(timeout=TIMEOUT_S))
-        except queue.Empty:
-            raise AssertionError(f"only {len(out)} of {count} messages came out of the source") from None
-    return out
-
-
-def batch_times(batches: list[Any]) -> list[int]:
-    return [b.timestamp_ns + offset for b in batches for offset in b.sample_offset_ns]
-
-
-def unverified() -> ssl.SSLContext:
-    return ssl._create_unverified_context()  # the test trusts its own fresh certificate
+from support.phone import T0_NS, batch_times, entrance_code, take, talk, unverified
 
 
 def logger_body(start: int, count: int, accel=(0.0, 0.0, 9.80665), message_id: int = 1) -> str:
@@ -131,16 +68,6 @@ def test_plain_http_push_and_acceleration_in_g_is_converted(phone: PhoneSource):
     batches = take(phone, 2)
     np.testing.assert_allclose(np.reshape(batches[0].accel_g, (-1, 3))[0], [0.0, 0.6, 0.8], rtol=1e-6)
     assert phone.counters.converted_g >= 50
-
-
-async def talk(url: str, sent: list[Any]) -> list[dict[str, Any]]:
-    """Send each message on the page's WebSocket and collect one reply per message."""
-    async with aiohttp.ClientSession() as client, client.ws_connect(url, ssl=unverified()) as socket:
-        replies = []
-        for message in sent:
-            await socket.send_str(message if isinstance(message, str) else json.dumps(message))
-            replies.append(await socket.receive_json(timeout=TIMEOUT_S))
-        return replies
 
 
 def motion(start: int, count: int, accel=(0.0, 0.0, 9.81), skip_time_of: int | None = None) -> dict[str, Any]:
@@ -219,6 +146,8 @@ def test_edge_source_url(venue_toml: Path):
     with pytest.raises(ConfigError, match="has no sensor 'seat'"):
         open_sources(["seat=phone://127.0.0.1:0"], "walker", 1.0, stop, venue_toml)
     with pytest.raises(ConfigError, match="a phone source goes alone"):
+        open_sources(["phone=phone://127.0.0.1:0", "x=phone://127.0.0.1:0"], "walker", 1.0, stop, venue_toml)
+    with pytest.raises(ConfigError, match="'x=serial:///dev/null': phone and serial sources cannot be mixed"):
         open_sources(["phone=phone://127.0.0.1:0", "x=serial:///dev/null"], "walker", 1.0, stop, venue_toml)
     with pytest.raises(ConfigError, match="--venue VENUE.toml is needed"):
         open_sources(["phone=phone://127.0.0.1:0"], "walker", 1.0, stop, None)

@@ -16,7 +16,8 @@ from protocol.errors import ConfigError, ReckonError
 from protocol.session import session_from_dict
 from protocol.messages import imu_batch
 from protocol.session_log import SessionWriter, read_session
-from sim_devices.devices.ximu3 import Faults, SerialDevice
+from sim_devices.devices.pty import Faults
+from sim_devices.devices.ximu3 import SerialDevice
 
 RATE_HZ = 200
 DEADLINE_S = 10.0  # upper bound of any wait; a passing run takes a fraction of a second

@@ -16,7 +16,7 @@ import pytest
 
 from edge.swim import walls
 from edge.swim.bins import BIN_HZ, COLUMNS, DV_X, G, HEAD_X, HEAD_Y, RATE, SURGE, YAW
-from edge.swim.edge import SwimTracker
+from edge.swim.edge import SwimEdge, SwimTracker
 from protocol.session import Mount, Route, Sensor
 from reckon.evaluation.swim_eval import SwimReport, _score_detected, to_json, to_table
 from sim_devices.swim import simulate_set
@@ -47,6 +47,16 @@ def test_a_turn_is_the_rotation_about_the_vertical_even_when_the_heading_is_lost
     diagonal = _rows(10.0)
     diagonal[500:700, YAW] = -35.75 / 2.0  # the route's turn, over 2 s
     assert not walls.reversed_at(diagonal, 699, since=0)
+
+
+def test_a_length_without_a_wall_is_dropped_counted_and_left_to_the_caller_to_log():
+    tracker = SwimTracker(Sensor("s", Mount.WAIST, 1000.0, forward_axis="+x", left_axis="+y"), 25.0, Route.STRAIGHT,
+                          max_length_s=1.0)  # a buffer of 1 + 13 s of margins
+    edge = SwimEdge(SimpleNamespace(id="swimmer", sensors=[], route=Route.STRAIGHT), 25.0)
+    edge.trackers["s"] = tracker
+    assert tracker.push_rows(_rows(15.0)) == [] and tracker.counters.overlong == 1
+    assert edge.warnings() == ["no wall for 14 s: dropping the length in progress"]
+    assert edge.warnings() == []  # each drop is reported once
 
 
 def test_rest_is_stiller_than_a_kickboards_kicking():

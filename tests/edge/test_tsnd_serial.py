@@ -19,8 +19,8 @@ from protocol.errors import ConfigError, InputError
 from protocol.messages import imu_batch
 from protocol.session import session_from_dict
 from protocol.session_log import SessionWriter
-from reckon.processes.edge import SerialSources
-from sim_devices.devices.ximu3 import Faults
+from edge.sources.serial import SerialSources
+from sim_devices.devices.pty import Faults
 from sim_devices.devices.tsnd import TsndDevice
 
 DEADLINE_S = 10.0  # upper bound of any wait; a passing run takes about a second

@@ -9,7 +9,7 @@ import pytest
 from hub.dedup import Deduplicator, DedupSettings, Verdict
 from protocol import keys, messages
 from protocol.session_log import LogMessages
-from sim_devices.wheelchair import simulate
+from support.games import Game
 
 NEW, DUPLICATE, STALE = Verdict.NEW, Verdict.DUPLICATE, Verdict.STALE
 
@@ -91,9 +91,8 @@ def test_bad_settings_name_the_value():
         DedupSettings(window=0)
 
 
-def test_a_simulated_game_with_a_replayed_window_loses_nothing_and_repeats_nothing(tmp_path):
-    path = tmp_path / "game.mcap"
-    simulate(players=2, duration_s=6.0, seed=4, output=path)
+def test_a_simulated_game_with_a_replayed_window_loses_nothing_and_repeats_nothing(games):
+    path = games.path(Game(players=2, duration_s=6.0, seed=4))
     inputs = [(topic, message) for _, topic, message in LogMessages(path)
               if messages.type_name(message) in ("ImuBatch", "BeaconSighting")]
     cut = len(inputs) // 2

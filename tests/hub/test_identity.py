@@ -1,12 +1,13 @@
-"""Our streaming track-to-agent association (hub/identity/engine.py) on crafted scenes (tests/hub/identity_scenes.py)."""
+"""Our streaming track-to-agent association (hub/identity/engine.py) on crafted scenes (tests/support/identity_scenes.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from hub.identity.engine import IdentityEngine, IdentitySettings, _Track
-from identity_scenes import S, camera_frames, imu_batches, session, waypoints_path
+from hub.identity.book import Track
+from hub.identity.engine import IdentityEngine, IdentitySettings
+from support.identity_scenes import CROSSING, S, camera_frames, imu_batches, session, waypoints_path
 
 
 def run(paths: dict, tracks: list, seed: int = 1, end_s: float = 30.0, settings: IdentitySettings = IdentitySettings(),
@@ -32,16 +33,6 @@ def holder_at(changes: list, agent: str, time_s: float) -> int:
         if who == agent and t <= time_s:
             held = track
     return held
-
-
-CROSSING = {
-    "a": waypoints_path([(0, 0.5, 1.0), (2, 0.5, 1.0), (8, 5.0, 2.0), (11, 5.0, 2.0), (16, 1.0, 0.6), (20, 1.0, 0.6),
-                         (26, 4.5, 2.5), (30, 4.5, 2.5)]),
-    "b": waypoints_path([(0, 5.0, 1.0), (3, 5.0, 1.0), (9, 0.6, 2.0), (12, 2.5, 2.5), (15, 2.5, 2.5), (21, 5.0, 0.5),
-                         (30, 5.0, 0.5)]),
-    "c": waypoints_path([(0, 2.8, 0.4), (5, 2.8, 0.4), (7, 2.0, 1.5), (13, 2.0, 1.5), (18, 4.0, 1.0), (24, 1.5, 2.5),
-                         (30, 1.5, 2.5)]),
-}
 
 
 def test_identities_follow_a_switch_at_a_crossing_and_ignore_a_false_track():
@@ -376,7 +367,7 @@ def test_a_chairs_direction_of_travel_tells_two_chairs_of_one_speed_apart():
     """Two chairs at the same speed, one going +x and one +y: speed, moving and turn rate cannot tell their
     tracks apart, the direction of the edge's dead-reckoned velocity can (its heading stays within a few
     degrees: docs/identity.md). Slow bins give no direction."""
-    from identity_scenes import edge_poses
+    from support.identity_scenes import edge_poses
 
     times = np.arange(0, 4, 0.01)
     paths = {"a": np.column_stack([1.0 + 1.5 * times, np.full_like(times, 1.0)]),
@@ -389,7 +380,7 @@ def test_a_chairs_direction_of_travel_tells_two_chairs_of_one_speed_apart():
     track_v = np.array([[1.5, 0.0], [0.0, 1.5], [0.2, 0.0]])  # a's direction, b's, and a slow track
     tvx = np.repeat(track_v[:, :1], 10, axis=1)
     tvy = np.repeat(track_v[:, 1:], 10, axis=1)
-    cost = engine._course_cost([_Track(None, None, None) for _ in range(3)], tvx, tvy, blocks["vx"], blocks["vy"], 10)
+    cost = engine._course_cost([Track(None, None, None) for _ in range(3)], tvx, tvy, blocks["vx"], blocks["vy"], 10)
     assert cost[0, 0].max() < 0.1 and cost[1, 1].max() < 0.1  # the right pairs: the same direction
     assert cost[0, 1].min() == cost[1, 0].min() == engine.settings.clip  # 90 degrees apart: clipped at 3 sigma
     assert np.isnan(cost[2]).all()  # too slow to have a direction
@@ -485,7 +476,7 @@ def test_the_hubs_pose_of_a_chair_grows_doubtful_while_its_poses_have_not_arrive
     """The identity engine asks the hub where a chair was at a camera time; if the chair's newest pose is
     older (its link stalled, a burst), the chair may have moved since: the sd grows at STALE_MPS."""
     from hub.venue import STALE_MPS, VenueHub
-    from identity_scenes import edge_poses
+    from support.identity_scenes import edge_poses
 
     hub = VenueHub(session(["a"], chairs=True))
     times = np.arange(0, 2.0, 0.01)

@@ -1,4 +1,4 @@
-"""`reckon eval`'s identity table on a crafted session log (tests/hub/identity_scenes.py)."""
+"""`reckon eval`'s identity table on a crafted session log (tests/support/identity_scenes.py)."""
 
 from __future__ import annotations
 
@@ -7,10 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from identity_scenes import write_scene
 from protocol.session_log import read_session
 from reckon.evaluation.identity_eval import evaluate_identity, to_json, to_table
-from test_identity import CROSSING
+from support.identity_scenes import CROSSING, write_scene
 
 TRACKS = [(1, "a", 0, 6), (2, "b", 0, 6), (3, "c", 0, 30), (4, "b", 6, 30), (5, "a", 6, 14), (6, "", 10, 14),
           (7, "a", 14.5, 30)]

@@ -7,13 +7,12 @@ import threading
 
 import numpy as np
 
-from identity_scenes import camera_frames, edge_poses, imu_batches, session
 from protocol import keys, messages
 from protocol.bus import Role
 from reckon.transport.bus import Publisher, flush, open_session, wait_for_peers, zenoh_config
-from reckon.tools.demo import free_endpoint
+from reckon.transport.config import free_endpoint
 from reckon.processes.hub import run_hub
-from test_identity import CROSSING
+from support.identity_scenes import CROSSING, camera_frames, edge_poses, imu_batches, session
 
 WAIT_S = 60.0
 

@@ -16,6 +16,7 @@ from protocol.errors import ConfigError, InputError
 from protocol.session import load_toml, session_from_dict, to_dict
 from protocol.messages import imu_batch
 from protocol.session_log import SessionWriter, read_session
+from support.venue import agent_table, sensor_table, write_venue
 
 SESSION = {
     "venue": {"name": "court", "beacons": [{"id": "goal-a", "x_m": 1.575, "y_m": 7.5}]},
@@ -106,8 +107,7 @@ def test_session_description_errors_name_the_key(mutate, message):
 
 
 def test_toml_errors_name_the_file(tmp_path):
-    path = tmp_path / "venue.toml"
-    path.write_text('[venue]\nname = "court"\ncolour = "red"\n')
+    path = write_venue(tmp_path / "venue.toml", "court", colour="red")
     with pytest.raises(ConfigError, match=r"venue.toml: venue.colour: unknown key"):
         load_toml(path)
     path.write_text("[venue\n")
@@ -199,30 +199,11 @@ def test_beacon_identity_round_trips_through_toml_and_json(tmp_path):
 
     from protocol.session import to_json
 
-    path = tmp_path / "venue.toml"
-    path.write_text(f"""
-[venue]
-name = "court"
-[[venue.beacons]]
-id = "goal-a"
-x_m = 1.575
-y_m = 7.5
-identity = "iBeacon:{IDENTITY_UUID.upper()}:0001:02"
-[[venue.beacons]]
-id = "goal-b"
-x_m = 26.425
-y_m = 7.5
-identity = "EDDYSTONE:00010203040506070809:A1B2C3D4E5F6"
-[[venue.beacons]]
-id = "goal-c"
-x_m = 14.0
-y_m = 7.5
-[[agents]]
-id = "chair01"
-[[agents.sensors]]
-id = "chair01-seat"
-mount = "seat"
-""")
+    path = write_venue(tmp_path / "venue.toml", "court", beacons=[
+        {"id": "goal-a", "x_m": 1.575, "y_m": 7.5, "identity": f"iBeacon:{IDENTITY_UUID.upper()}:0001:02"},
+        {"id": "goal-b", "x_m": 26.425, "y_m": 7.5, "identity": "EDDYSTONE:00010203040506070809:A1B2C3D4E5F6"},
+        {"id": "goal-c", "x_m": 14.0, "y_m": 7.5}],
+        agents=[agent_table("chair01", sensors=[sensor_table("chair01-seat", "seat")])])
     session = load_toml(path)
     assert [b.identity for b in session.venue.beacons] == [
         f"ibeacon:{IDENTITY_UUID}:1:2", "eddystone:00010203040506070809:a1b2c3d4e5f6", None]
@@ -298,8 +279,7 @@ def test_pedestrian_venue_round_trips_through_json_and_a_geojson_file(tmp_path):
     plan = {"type": "FeatureCollection", "features": [
         {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [[[0, -1], [5, -1], [5, 1], [0, 1]]]}}]}
     (tmp_path / "plan.geojson").write_text(json.dumps(plan))
-    (tmp_path / "venue.toml").write_text('[venue]\nname = "hall"\nfloor_plan = "plan.geojson"\n'
-                                         '[[agents]]\nid = "walker1"\nkind = "pedestrian"\n')
+    write_venue(tmp_path / "venue.toml", "hall", floor_plan="plan.geojson", agents=[agent_table("walker1", "pedestrian")])
     assert load_toml(tmp_path / "venue.toml").venue.floor_plan == session.venue.floor_plan
     # A chair venue's description is unchanged by the pedestrian fields (older logs stay identical).
     assert "stands" not in to_dict(session_from_dict(SESSION))["venue"]

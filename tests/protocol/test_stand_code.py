@@ -1,5 +1,6 @@
-"""QR calibration stands: the code's text and integrity (protocol/stand_code.py), printable codes
-and reading them back from images (reckon/tools/qr.py), and `reckon qr make|read`."""
+"""QR calibration stands: the code's text and integrity (protocol/stand_code.py), the key file
+(edge/sources/phone/stand_key.py), printable codes and reading them back from images (reckon/tools/qr.py),
+and `reckon qr make|read`."""
 
 from __future__ import annotations
 
@@ -19,25 +20,24 @@ from PIL import Image, ImageDraw, ImageFilter
 
 from protocol.errors import ConfigError, InputError
 from protocol.session import Session, Stand, Venue
-from protocol.stand_code import (StandCodeError, decode, encode, load_key, new_key, scan_message,
-                                 write_key)
+from protocol.stand_code import StandCodeError, decode, encode, new_key, scan_message
+from reckon.cli import qr as qr_command
 from reckon.tools import qr
+from edge.sources.phone.stand_key import load_key, write_key
+from support.venue import agent_table, write_venue
 
 KEY = bytes(range(32))
 OTHER_KEY = bytes(range(1, 33))
 ENTRANCE = Stand("entrance", 3.3, 33.55, floor=0, heading_deg=-90.0, tilt_deg=0.0)
 LIFT = Stand("lift-3", -12.5, 4.0, floor=2, heading_deg=180.0, tilt_deg=10.0)
 STANDS = (ENTRANCE, LIFT)
-VENUE_TOML = """\
-[venue]
-name = "hall"
-stands = [{id = "entrance", x_m = 3.3, y_m = 33.55, heading_deg = -90.0},
-          {id = "lift-3", x_m = -12.5, y_m = 4.0, floor = 2, heading_deg = 180.0, tilt_deg = 10.0}]
 
-[[agents]]
-id = "walker"
-kind = "pedestrian"
-"""
+
+def hall(path: Path) -> Path:
+    """The hall's venue file: STANDS (the entrance with the loader's defaults for floor and tilt), one walker."""
+    return write_venue(path, "hall", agents=[agent_table("walker", "pedestrian")], stands=[
+        {"id": "entrance", "x_m": 3.3, "y_m": 33.55, "heading_deg": -90.0},
+        {"id": "lift-3", "x_m": -12.5, "y_m": 4.0, "floor": 2, "heading_deg": 180.0, "tilt_deg": 10.0}])
 
 
 def reason(text: str, venue: str = "hall", key: bytes = KEY, stands: tuple[Stand, ...] = STANDS) -> str:
@@ -232,8 +232,7 @@ def test_a_glare_spot_over_the_data_still_reads(codes):
 
 
 def test_decode_image_errors(tmp_path):
-    not_image = tmp_path / "venue.toml"
-    not_image.write_text(VENUE_TOML)
+    not_image = hall(tmp_path / "venue.toml")
     with pytest.raises(InputError, match=f"{not_image}: not an image"):
         qr.decode_image(not_image)
     with pytest.raises(InputError, match="no such file"):
@@ -254,27 +253,26 @@ def test_make_codes_needs_stands():
 
 def command(*argv: str) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="reckon")
-    qr.register(parser.add_subparsers(dest="command", required=True))
+    qr_command.register(parser.add_subparsers(dest="command", required=True))
     return parser.parse_args(["qr", *argv])
 
 
 def test_qr_make_creates_the_key_once_and_read_checks_codes(tmp_path, capsys):
-    venue = tmp_path / "venue.toml"
-    venue.write_text(VENUE_TOML)
+    venue = hall(tmp_path / "venue.toml")
     out = tmp_path / "codes"
     args = command("make", str(venue), "-o", str(out))
-    assert args.run(args) == 0
+    assert args.run(args, print) == 0
     printed = capsys.readouterr().out
     key_path = tmp_path / "hall.standkey"
     assert f"created a new stand key in {key_path}. It is a secret" in printed
     key = load_key(key_path)
     args = command("make", str(venue), "-o", str(out))
-    assert args.run(args) == 0
+    assert args.run(args, print) == 0
     assert "created" not in capsys.readouterr().out and load_key(key_path) == key  # reused, not replaced
 
     foreign = qr.make_codes(Session(Venue("hall", stands=(ENTRANCE,)), agents=()), OTHER_KEY, tmp_path / "foreign")
     args = command("read", str(out / "hall-lift-3.png"), str(foreign[0]), "--venue", str(venue))
-    assert args.run(args) == 1
+    assert args.run(args, print) == 1
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].endswith("hall-lift-3.png: stand lift-3: x -12.50 m, y 4.00 m, floor 2, heading 180.00 deg, "
                              "tilt 10.00 deg")
@@ -283,8 +281,7 @@ def test_qr_make_creates_the_key_once_and_read_checks_codes(tmp_path, capsys):
 
 
 def test_qr_read_with_a_missing_key_file_names_it(tmp_path):
-    venue = tmp_path / "venue.toml"
-    venue.write_text(VENUE_TOML)
+    venue = hall(tmp_path / "venue.toml")
     args = command("read", "any.png", "--venue", str(venue), "--key-file", str(tmp_path / "none.standkey"))
     with pytest.raises(ConfigError, match="none.standkey: no stand key file there"):
-        args.run(args)
+        args.run(args, print)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import importlib
+import math
 import re
 from pathlib import Path
 
@@ -15,6 +16,7 @@ import pytest
 
 from protocol.errors import ConfigError
 from protocol.session import Agent, Beacon, MapPoint, Sensor, Session, Stand, Venue, load_toml, session_from_dict
+from support.venue import agent_table, sensor_table, write_venue
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "session-format.md"
 HEADING = re.compile(r"^#{2,3} (.+)$")
@@ -152,9 +154,8 @@ def test_a_beacon_just_off_the_court_within_its_radius_loads():
 
 
 def test_a_toml_file_names_itself_and_the_key(tmp_path):
-    path = tmp_path / "venue.toml"
-    path.write_text('[venue]\nname = "court"\n\n[[agents]]\nid = "walker"\nkind = "pedestrian"\n\n'
-                    '[[agents.sensors]]\nid = "phone"\nmount = "hand"\nrate_hz = nan\n')
+    path = write_venue(tmp_path / "venue.toml", "court", agents=[
+        agent_table("walker", "pedestrian", sensors=[sensor_table("phone", "hand", rate_hz=math.nan)])])
     with pytest.raises(ConfigError, match=re.escape(f"{path}: agents[0].sensors[0].rate_hz: nan is not a finite")):
         load_toml(path)
 

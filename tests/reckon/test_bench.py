@@ -14,7 +14,9 @@ from protocol import bus as wire
 from protocol import keys, messages
 from protocol.session import Mount
 from protocol.session_log import read_description
-from reckon.bench.pipeline import format_table, latencies, run_bench
+from reckon.bench.latency import latencies
+from reckon.bench.pipeline import run_bench
+from reckon.bench.report import format_table
 from reckon.transport.bus import Received
 
 

@@ -11,7 +11,9 @@ import pytest
 
 from hub.chair.hub import ChairHub, HubSettings
 from protocol import messages
-from reckon.bench.load import COURT_AGENTS, LoadSpec, contacts, format_load, load_session, run_load
+from reckon.bench.load import run_load
+from reckon.bench.load_report import format_load
+from reckon.bench.load_spec import COURT_AGENTS, LoadSpec, contacts, load_session
 from reckon.bench.soak import format_soak, run_soak
 
 

@@ -8,11 +8,9 @@ from __future__ import annotations
 
 import json
 import queue
-import socket
 import subprocess
 import sys
 import threading
-import time
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -25,8 +23,10 @@ from protocol import bus as wire
 from protocol import keys, messages
 from protocol.errors import ConfigError, InputError
 from protocol.session_log import read_session
-from reckon.transport.bus import (Alive, BusError, PolledSubscription, Publisher, Subscription, flush, open_session,
-                        wait_for_peers, zenoh_config)
+from reckon.transport.bus import (Alive, Answer, BusError, CallbackSubscription, DirectSubscription, PolledSubscription,
+                                  Publisher, Subscription, TokenWatch, flush, open_session, query, wait_for_peers,
+                                  zenoh_config)
+from reckon.transport.config import free_endpoint
 from reckon.transport.record import RecordSummary, record
 from reckon.transport.replay import ReplayProgress, ReplaySummary, replay
 from sim_devices.wheelchair import simulate
@@ -69,12 +69,6 @@ with open_session(zenoh_config(connect=[endpoint])) as session:
             publisher.publish(keys[name], messages.new(name, **fields))
     print(len(flush(session, wire.alive_selector(venue), 15.0)))
 """
-
-
-def free_endpoint() -> str:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{probe.getsockname()[1]}"
 
 
 def run_in_thread(target: Any, *args: Any, **kwargs: Any) -> tuple[threading.Thread, dict[str, Any]]:
@@ -228,16 +222,15 @@ def test_slow_subscriber_loses_nothing():
 
             thread, outcome = run_in_thread(publish_all)
             # the consumer does not read until the full queue has held the publisher back
-            deadline = time.monotonic() + WAIT_S
-            while subscription.stats.full_waits == 0 and time.monotonic() < deadline:
-                thread.join(timeout=0.01)
+            assert subscription.held_back.wait(WAIT_S)
             sequences = [subscription.get(timeout=WAIT_S).decode().sequence for _ in range(count)]
             assert joined(thread, outcome) == count
-            with pytest.raises(queue.Empty):
-                subscription.get(timeout=0.2)  # nothing beyond what was sent
+            with Publisher(edge) as publisher:  # a marker after the rest: in FIFO order, nothing came between
+                publisher.publish(key, messages.new("ImuBatch", **{**SAMPLES["ImuBatch"], "sequence": count}))
+            assert subscription.get(timeout=WAIT_S).decode().sequence == count
     assert sequences == list(range(count))
     assert subscription.stats.full_waits > 0  # the queue did fill: the publisher was held back, not dropped
-    assert subscription.stats.discarded == 0 and subscription.stats.received == count
+    assert subscription.stats.discarded == 0 and subscription.stats.received == count + 1
 
 
 def test_polled_subscription_holds_the_publisher_back_and_loses_nothing():
@@ -252,34 +245,37 @@ def test_polled_subscription_holds_the_publisher_back_and_loses_nothing():
                 Alive(hub, VENUE, wire.Role.HUB):
             wait_for_peers(edge, wire.alive_selector(VENUE, wire.Role.HUB), 1, WAIT_S)
 
+            fifos_full = threading.Event()
+
             def publish_all() -> int:
                 with Publisher(edge) as publisher:
-                    for sequence in range(count):
+                    for sequence in range(count + 1):  # the last pair: markers, sent after the rest
+                        # 4 of each are in the FIFOs of 4, which nobody takes from: full
+                        if sequence == 4 and flush(edge, wire.alive_selector(VENUE, wire.Role.HUB), WAIT_S):
+                            fifos_full.set()
                         publisher.publish(imu, messages.new("ImuBatch", **{**big, "sequence": sequence}))
                         publisher.publish(beacon, messages.new("BeaconSighting", **{**SAMPLES["BeaconSighting"],
                                                                                     "timestamp_ns": sequence + 1}))
                     return publisher.sent
 
             thread, outcome = run_in_thread(publish_all)
-            thread.join(timeout=1.0)
-            assert thread.is_alive()  # held back: nothing was taken, so the FIFOs are full
+            assert fifos_full.wait(WAIT_S)  # from here on every put waits for the consumer: held back
             taken: dict[str, list[int]] = {imu: [], beacon: []}
             batches = 0
-            while sum(map(len, taken.values())) < 2 * count:
+            while not (taken[imu][-1:] == taken[beacon][-1:] == [count]):  # until both markers
                 for item in subscription.take(limit=64, timeout=WAIT_S):
                     message = item.decode()
                     taken[item.key].append(message.sequence if item.key == imu else message.timestamp_ns - 1)
                     assert item.source_ns is not None and item.received_ns > 0
                 batches += 1
-            assert joined(thread, outcome) == 2 * count
-            with pytest.raises(queue.Empty):
-                subscription.take(timeout=0.2)  # nothing beyond what was sent
+            assert joined(thread, outcome) == 2 * (count + 1)
             subscription.undeclare()
             assert subscription.take(timeout=WAIT_S) is None and subscription.get(timeout=WAIT_S) is None
-    assert taken[imu] == list(range(count)) and taken[beacon] == list(range(count))
+    # each selector in FIFO order: nothing beyond what was sent came before its marker
+    assert taken[imu] == list(range(count + 1)) and taken[beacon] == list(range(count + 1))
     assert batches < 2 * count  # taken many at a time
     assert subscription.stats.full_waits > 0 and subscription.stats.discarded == 0
-    assert subscription.stats.received == subscription.stats.delivered == 2 * count
+    assert subscription.stats.received == subscription.stats.delivered == 2 * (count + 1)
 
 
 def test_polled_subscription_delivers_what_came_before_undeclare_and_close_discards_the_rest():
@@ -330,6 +326,54 @@ def test_polled_subscription_by_source_time_gives_the_order_of_the_puts_across_s
     assert all(item.received_ns == batch[0].received_ns for item in batch)  # one sweep, one clock reading
 
 
+def test_direct_subscriptions_ring_drops_the_oldest_and_fifo_keeps_every_sample():
+    endpoint = free_endpoint()
+    ring_key, fifo_key = keys.status(VENUE, "a", "a-seat"), keys.correction(VENUE, "a")
+    with open_session(zenoh_config(listen=[endpoint])) as hub, open_session(zenoh_config(connect=[endpoint])) as edge:
+        ring = DirectSubscription.ring(hub, ring_key, 2)
+        fifo = DirectSubscription.fifo(hub, fifo_key, 8)
+        with Alive(hub, VENUE, wire.Role.HUB):
+            wait_for_peers(edge, wire.alive_selector(VENUE, wire.Role.HUB), 1, WAIT_S)
+            with Publisher(edge) as publisher:
+                for n in range(5):
+                    publisher.publish(ring_key, messages.new("DeviceStatus", timestamp_ns=n, agent_id="a"))
+                    publisher.publish(fifo_key, messages.new("Correction", **{**SAMPLES["Correction"], "timestamp_ns": n}))
+            assert flush(edge, wire.alive_selector(VENUE, wire.Role.HUB), WAIT_S)  # all 10 are in the handlers
+            assert ring.try_get().decode().timestamp_ns == 3  # a ring of 2: the three oldest went
+            assert ring.try_get().decode().timestamp_ns == 4 and ring.try_get() is None
+            assert [fifo.try_get().decode().timestamp_ns for _ in range(5)] == list(range(5))
+            assert fifo.try_get() is None
+            ring.close()
+            assert ring.try_get() is None  # undeclared: nothing more, no error
+            reader, read = run_in_thread(lambda: [item.decode().timestamp_ns for item in fifo])
+            with Publisher(edge) as publisher:
+                for n in range(5, 8):
+                    publisher.publish(fifo_key, messages.new("Correction", **{**SAMPLES["Correction"], "timestamp_ns": n}))
+            assert flush(edge, wire.alive_selector(VENUE, wire.Role.HUB), WAIT_S)
+            fifo.undeclare()  # the iterating thread gets what the FIFO holds, then its loop ends
+            assert joined(reader, read) == [5, 6, 7]
+
+
+def test_callback_subscription_answer_query_and_token_watch():
+    endpoint = free_endpoint()
+    key, answer_key = keys.correction(VENUE, "a"), wire.session_key(VENUE)
+    got: queue.Queue[Any] = queue.Queue()
+    tokens: queue.Queue[tuple[str, bool]] = queue.Queue()
+    with open_session(zenoh_config(listen=[endpoint])) as hub, open_session(zenoh_config(connect=[endpoint])) as edge:
+        alive = Alive(hub, VENUE, wire.Role.HUB, "h1")
+        with CallbackSubscription(hub, key, got.put), Answer(hub, answer_key, b"description", wire.SESSION_ENCODING), \
+                TokenWatch(edge, wire.alive_selector(VENUE, wire.Role.HUB), lambda k, up: tokens.put((k, up))):
+            assert tokens.get(timeout=WAIT_S) == (alive.key, True)  # already present: reported from history
+            with Publisher(edge) as publisher:
+                for n in range(3):
+                    publisher.publish(key, messages.new("Correction", **{**SAMPLES["Correction"], "timestamp_ns": n}))
+            assert [got.get(timeout=WAIT_S).decode().timestamp_ns for _ in range(3)] == [0, 1, 2]
+            replies = list(query(edge, answer_key, WAIT_S))
+            assert [(r.key, r.payload, r.encoding) for r in replies] == [(answer_key, b"description", wire.SESSION_ENCODING)]
+            alive.close()
+            assert tokens.get(timeout=WAIT_S) == (alive.key, False)
+
+
 def test_recorder_started_after_the_replayer_waits_gets_everything(game, tmp_path):
     endpoint, output = free_endpoint(), tmp_path / "late.mcap"
     waiting, stop = threading.Event(), threading.Event()
@@ -355,12 +399,11 @@ def test_recorder_started_after_the_replayer_waits_gets_everything(game, tmp_pat
     assert summary.publish_s >= 0.9 * summary.log_span_s / speed
 
 
-def test_waiting_for_peers_is_bounded():
+def test_waiting_for_peers_gives_up_after_its_timeout():
     with open_session(zenoh_config(listen=[free_endpoint()])) as session:
-        started = time.monotonic()
-        with pytest.raises(BusError, match="saw 0: none"):
-            wait_for_peers(session, wire.alive_selector(VENUE), 1, 0.2)
-        assert time.monotonic() - started < 5.0
+        thread, outcome = run_in_thread(wait_for_peers, session, wire.alive_selector(VENUE), 1, 0.2)
+        with pytest.raises(BusError, match=r"waited 0\.2 s for 1 live peer\(s\) on reckon/court/alive/\*/\*; saw 0: none"):
+            joined(thread, outcome)  # it returns (raising) by itself: nobody else ends the wait
 
 
 def test_recorder_stopped_before_a_description_writes_nothing(tmp_path):

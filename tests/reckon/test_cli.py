@@ -9,16 +9,27 @@ import sys
 import pytest
 
 from reckon.cli import main
+from support.games import Game
 
+GAME = Game(players=4, duration_s=40.0, seed=3)
 RESULT_KEYS = {"method", "heading", "corrections", "mean_error_m", "max_team_mean_error_m",
                "worst_agent_mean_error_m", "final_team_mean_error_m"}
 
 
-@pytest.fixture(scope="module")
-def game(tmp_path_factory):
-    path = tmp_path_factory.mktemp("cli") / "game.mcap"
-    assert main(["-q", "sim", "wheelchair", "--players", "4", "--duration", "40", "--seed", "3", "-o", str(path)]) == 0
-    return path
+def test_sim_command_writes_the_simulators_game(games, tmp_path):
+    """`reckon sim wheelchair` is `simulate` with the same settings: the same log, record for record
+    (the other tests here take the game from `simulate`, shared with the suite)."""
+    from mcap.reader import make_reader
+
+    def records(path):
+        with open(path, "rb") as stream:
+            return [(channel.topic, message.log_time, message.data)
+                    for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)]
+
+    path = tmp_path / "game.mcap"
+    assert main(["-q", "sim", "wheelchair", "--players", "2", "--duration", "5", "--seed", "3", "-o", str(path)]) == 0
+    written = records(path)
+    assert len(written) > 500 and written == records(games.path(Game(players=2, duration_s=5.0, seed=3)))
 
 
 def test_eval_json_has_every_heading_and_correction_set(game, capsys):
@@ -77,15 +88,11 @@ def test_console_script_runs(tmp_path):
     assert result.stderr.startswith("reckon: error:")
 
 
-def test_replay_into_record_over_zenoh(game, tmp_path):
+def test_replay_into_record_over_zenoh(game, free_endpoint, tmp_path):
     """`reckon record` in its own process, `reckon replay` here: the log comes back whole."""
-    import socket
-
     from protocol.session_log import read_session
 
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        endpoint = f"tcp/127.0.0.1:{probe.getsockname()[1]}"
+    endpoint = free_endpoint()
     output = tmp_path / "recorded.mcap"
     recorder = subprocess.Popen([sys.executable, "-m", "reckon.cli", "-q", "record", "--venue", "court",
                                  "-o", str(output), "--until-end", "--listen", endpoint],
@@ -115,3 +122,17 @@ def test_demo_runs_end_to_end_on_a_short_game(tmp_path, capsys):
     assert "live pipeline" in out and "mean error live" in out
     assert "paper" in out and "reckon" in out  # the offline comparison table
     assert (tmp_path / "hub.mcap").stat().st_size > 0 and any((tmp_path / "plots").iterdir())
+
+
+def test_a_missing_extra_is_one_line_naming_it(tmp_path, monkeypatch, capsys):
+    monkeypatch.delitem(sys.modules, "reckon.tools.foxglove", raising=False)
+    monkeypatch.setitem(sys.modules, "foxglove", None)  # as if foxglove-sdk were not installed
+    assert main(["-q", "export", "foxglove", str(tmp_path / "in.mcap"), "-o", str(tmp_path / "out.mcap")]) == 2
+    err = capsys.readouterr().err
+    assert err == "reckon export needs the [eval] extra: pip install 'reckon[eval]' (foxglove is not installed)\n"
+
+
+def test_a_missing_module_of_our_own_is_a_traceback_not_an_extra(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "reckon.tools.foxglove", None)  # a broken install, not a missing extra
+    with pytest.raises(ModuleNotFoundError):
+        main(["-q", "export", "foxglove", str(tmp_path / "in.mcap"), "-o", str(tmp_path / "out.mcap")])

@@ -23,35 +23,21 @@ import pytest
 from protocol import bus as wire
 from protocol import keys, messages
 from protocol.errors import ConfigError
-from protocol.session import session_from_dict
 from reckon.transport.bus import Publisher, flush, open_session, wait_for_peers, zenoh_config
 from reckon.web.court_view import CourtView, parse_view_address
 from reckon.web.court_state import POSE_HISTORY, TRUTH_HISTORY, ViewState, ellipse
-from reckon.tools.demo import free_endpoint
 from reckon.processes.hub import run_hub
+from support.browser import CHROMIUM
+from support.court import CHAIRS, STEP_NS, T0_NS, chair_xy, pose, session
+from support.venue import write_venue
 
-CHROMIUM = "/usr/bin/chromium"
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking",
         "--disable-component-update", "--disable-sync"]
 WAIT_S = 30.0
 SCREENSHOT = Path(__file__).resolve().parents[2] / "docs" / "img" / "court-view.png"
-CHAIRS = ("c1", "c2", "c3")
-T0_NS = 1_000_000_000_000
-STEP_NS = 20_000_000  # 50 Hz edge poses
 TRUTH_OFFSET_M = (0.3, 0.0)  # truth = edge pose + this: the error against truth is 0.30 m exactly
 STATUS = messages.new("DeviceStatus", timestamp_ns=T0_NS, agent_id="c1", sensor_id="c1-seat", connected=True,
                       battery_pct=87.0, last_sample_age_s=0.02, samples=1000)
-
-
-def session():
-    chairs = [{"id": agent, "sensors": [{"id": f"{agent}-seat", "mount": "seat"}]} for agent in CHAIRS]
-    return session_from_dict({"venue": {"name": "court", "beacons": [{"id": "goal-a", "x_m": 1.2, "y_m": 7.5}],
-                                        "stands": [{"id": "bench", "x_m": 14.0, "y_m": 0.5}]}, "agents": chairs})
-
-
-def pose(agent: str, time_ns: int, x: float, y: float, track: int = messages.Track.LIVE, covariance=None):
-    return messages.new("EstimatedPose", timestamp_ns=time_ns, agent_id=agent, x_m=x, y_m=y, heading_rad=0.0,
-                        covariance=covariance or [0.25, 0, 0, 0, 0.25, 0, 0, 0, 0.01], method="reckon", track=track)
 
 
 def correction(agent: str, sequence: int, kind=messages.CorrectionKind.BEACON):
@@ -149,7 +135,7 @@ def test_ellipse_matches_the_covariance_eigenvalues():
 
 def test_handover_drops_the_oldest_instead_of_blocking_the_hub():
     with CourtView(session(), "127.0.0.1", 0, ring=16) as view:
-        view._closing.set()  # stop the server's ticks: the view now never drains (a stalled browser side)
+        view.server.close()  # stop the server's ticks: the view now never drains (a stalled browser side)
         view._thread.join(WAIT_S)
         for i in range(100):
             view.on_output(pose("c1", T0_NS + i, float(i), 0.0))
@@ -167,19 +153,6 @@ def test_view_address_is_checked():
 
 
 # -- end to end in Chromium --------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def playwright_api():
-    if shutil.which("chromium") is None and not Path(CHROMIUM).exists():
-        pytest.skip("Debian's chromium is not installed (apt-get install -y chromium)")
-    return pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
-
-
-def chair_xy(agent: str, step: int) -> tuple[float, float]:
-    """The scene: c1 rolls past the goal-a beacon along y = 7.5, c2 and c3 cross the court."""
-    t = step * STEP_NS / 1e9
-    return {"c1": (1.6 + 1.0 * t, 7.5), "c2": (8.0 + 1.5 * t, 3.0 + 0.5 * t), "c3": (20.0 - 1.0 * t, 11.0)}[agent]
 
 
 def publish_steps(publisher: Publisher, steps: range) -> None:
@@ -209,7 +182,7 @@ def agent_xy(page, agent: str) -> tuple[float, float]:
     return float(group.get_attribute("data-x")), float(group.get_attribute("data-y"))
 
 
-def test_page_shows_agents_moving_corrections_status_and_truth_error(playwright_api, tmp_path: Path):
+def test_page_shows_agents_moving_corrections_status_and_truth_error(browser_module, free_endpoint, tmp_path: Path):
     endpoint = free_endpoint()
     stop, ready = threading.Event(), threading.Event()
     results: dict = {}
@@ -220,7 +193,7 @@ def test_page_shows_agents_moving_corrections_status_and_truth_error(playwright_
         hub.start()
         assert ready.wait(WAIT_S)
         with open_session(zenoh_config(connect=[endpoint])) as bus, Publisher(bus) as publisher, \
-                playwright_api.sync_playwright() as playwright:
+                browser_module.sync_playwright() as playwright:
             wait_for_peers(bus, wire.alive_selector("court", wire.Role.HUB), 1, WAIT_S)
             browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=ARGS)
             try:
@@ -270,11 +243,10 @@ def test_page_shows_agents_moving_corrections_status_and_truth_error(playwright_
     assert (tmp_path / "court-view.png").stat().st_size > 10_000
 
 
-def test_hub_command_refuses_a_bad_or_taken_view_address(tmp_path: Path, capsys):
+def test_hub_command_refuses_a_bad_or_taken_view_address(free_endpoint, tmp_path: Path, capsys):
     from reckon.cli import main
 
-    venue = tmp_path / "court.toml"
-    venue.write_text('[venue]\nname = "court"\n\n[[agents]]\nid = "c1"\n')
+    venue = write_venue(tmp_path / "court.toml", "court", agents=[{"id": "c1"}])
     assert main(["hub", "--venue", str(venue), "--listen", free_endpoint(), "--view", "8080"]) == 2
     assert "--view '8080': expected HOST:PORT" in capsys.readouterr().err
     with socket.socket() as taken:

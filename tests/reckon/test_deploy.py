@@ -10,6 +10,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import json5
@@ -18,6 +19,7 @@ import zenoh
 
 from protocol.errors import ConfigError
 from reckon import cli
+from reckon.cli.bus import bus_config
 from reckon.transport.bus import DEFAULT_ENDPOINT, zenoh_config_from_file
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -227,19 +229,19 @@ def test_a_file_keeps_scouting_off_and_timestamping_on_unless_it_says_otherwise(
 def test_command_line_endpoints_and_mode_replace_the_files(tmp_path):
     path = write(tmp_path / "c.json5", {"mode": "client", "connect": {"endpoints": ["tls/hub.local:7447"]}})
     args = cli.build_parser().parse_args(["edge", "--agent", "a", "--source", "mcap://x.mcap", "--zenoh-config", str(path)])
-    config = cli._bus_config(args, "connect")
+    config = bus_config(args, "connect")
     assert (json.loads(config.get_json("mode")), json.loads(config.get_json("connect/endpoints"))) == (
         "client", ["tls/hub.local:7447"])
     args = cli.build_parser().parse_args(["edge", "--agent", "a", "--source", "mcap://x.mcap", "--zenoh-config", str(path),
                                           "--connect", "tcp/10.0.0.2:7447", "--mode", "peer"])
-    config = cli._bus_config(args, "connect")
+    config = bus_config(args, "connect")
     assert (json.loads(config.get_json("mode")), json.loads(config.get_json("connect/endpoints"))) == (
         "peer", ["tcp/10.0.0.2:7447"])
 
 
 def test_without_a_file_the_embedded_default_is_unchanged():
     args = cli.build_parser().parse_args(["hub", "--venue", "v.toml"])
-    config = cli._bus_config(args, "listen")
+    config = bus_config(args, "listen")
     assert json.loads(config.get_json("mode")) == "peer"
     assert json.loads(config.get_json("listen/endpoints")) == [DEFAULT_ENDPOINT]
 
@@ -319,3 +321,28 @@ def test_install_sh_is_valid_shell_and_installs_only_files_that_exist():
     for path in ("/var/lib/reckon/recordings", "/var/lib/reckon/spool", "/var/lib/reckon/numba-cache",
                  "/etc/reckon/zenoh", "/etc/reckon/tls", "/etc/reckon/edge"):
         assert path in text, path
+
+
+def installed_extras(*flags: str) -> subprocess.CompletedProcess:
+    """What install.sh asks pip for with these flags: its argument handling, run up to the root check."""
+    text = (DEPLOY / "install.sh").read_text()
+    start, end = text.index("hub=no\n"), text.index('[ "$(id -u)" -eq 0 ]')
+    return subprocess.run(["sh", "-c", text[start:end] + 'echo "$extras"', "install.sh", *flags],
+                          capture_output=True, text=True, timeout=30)
+
+
+@pytest.mark.parametrize("flags, extras", [
+    ((), "hub,edge"), (("--hub",), "hub"), (("--edge", "--serial"), "edge"), (("--edge", "--ble"), "edge"),
+    (("--hub", "--edge", "--serial", "--ble", "--no-units"), "hub,edge"), (("--serial",), "hub,edge"),
+])
+def test_install_sh_installs_the_runtime_extras_of_the_machines_role(flags, extras):
+    result = installed_extras(*flags)
+    assert (result.returncode, result.stdout.strip()) == (0, extras), result.stderr
+    assert '"$prefix/venv/bin/pip" install --upgrade "$clone[$extras]"' in (DEPLOY / "install.sh").read_text()
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    assert set(extras.split(",")) <= set(declared)
+
+
+def test_install_sh_refuses_devices_on_a_hub_only_machine():
+    result = installed_extras("--hub", "--serial")
+    assert result.returncode == 2 and "add --edge" in result.stderr

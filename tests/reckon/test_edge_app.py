@@ -3,36 +3,29 @@
 from __future__ import annotations
 
 import threading
-import time
 
 import numpy as np
 import pytest
 
 from protocol.session_log import read_session
 from reckon.transport.bus import zenoh_config
-from reckon.tools.demo import free_endpoint
 from reckon.processes.edge import mcap_source, open_sources, run_edge
 from reckon.evaluation.inputs import build_inputs
 from reckon.evaluation.reckon_run import merged_samples
 from reckon.transport.record import record
 from edge.chair.estimator import ChairSettings, start, step
 from protocol.errors import ConfigError
-from sim_devices.wheelchair import simulate
+from support.ble import BEACON_UUID, FakeBleakClient, FakeRadio, ibeacon_bytes, motion_bytes
+from support.games import Game
+from support.venue import agent_table, sensor_table, write_venue
+from support.waits import wait_until
 
+GAME = Game(players=2, duration_s=20.0, seed=4)
 WAIT_S = 60.0
 
 
-
-@pytest.fixture(scope="module")
-def game(tmp_path_factory):
-    path = tmp_path_factory.mktemp("edge") / "game.mcap"
-    simulate(players=2, duration_s=20.0, seed=4, output=path)
-    return path
-
-
-def edge_into_recorder(game, agent_id: str, output):
-    """Run `run_edge` on one agent of `game` into a recorder on a fresh loopback endpoint."""
-    endpoint = free_endpoint()
+def edge_into_recorder(game, agent_id: str, output, endpoint: str):
+    """Run `run_edge` on one agent of `game` into a recorder on `endpoint` (a fresh loopback one)."""
     stop, ready = threading.Event(), threading.Event()
     session = read_session(game).session
     recorder = threading.Thread(target=record, args=(zenoh_config(listen=[endpoint]), "court", output, stop, ready),
@@ -58,9 +51,9 @@ def offline_run(game, agent_id: str):
     return len(samples), state
 
 
-def test_edge_publishes_the_same_poses_as_the_offline_path(game, tmp_path):
+def test_edge_publishes_the_same_poses_as_the_offline_path(game, free_endpoint, tmp_path):
     output = tmp_path / "edge.mcap"
-    summary = edge_into_recorder(game, "chair01", output)
+    summary = edge_into_recorder(game, "chair01", output, free_endpoint())
     count, state = offline_run(game, "chair01")
     assert summary.samples == count
     np.testing.assert_allclose(summary.final_pose, state.mean[:3], atol=1e-6)
@@ -72,13 +65,13 @@ def test_edge_publishes_the_same_poses_as_the_offline_path(game, tmp_path):
     assert summary.poses >= 20 * 50 * 0.9  # 50 Hz
 
 
-def test_poses_on_the_bus(game, tmp_path):
+def test_poses_on_the_bus(game, free_endpoint, tmp_path):
     """The recorder sees EstimatedPose messages on pose/edge at about 50 Hz, covariance attached."""
     from mcap.reader import make_reader
     from mcap_protobuf.decoder import DecoderFactory
 
     output = tmp_path / "poses.mcap"
-    edge_into_recorder(game, "chair02", output)
+    edge_into_recorder(game, "chair02", output, free_endpoint())
     with open(output, "rb") as f:
         poses = [m for _, c, _, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages()
                  if c.topic == "reckon/court/chair02/pose/edge"]
@@ -93,13 +86,14 @@ def test_unknown_agent_and_scheme_are_config_errors(game):
         open_sources(["ble://AA:BB"], "chair01", 0.0, threading.Event())
     with pytest.raises(ConfigError, match="'chair01-seat=ble://AA:BB': .*'AA:BB' is not a Bluetooth address"):
         open_sources(["chair01-seat=ble://AA:BB"], "chair01", 0.0, threading.Event())
-    with pytest.raises(ConfigError, match="'chair01-seat=tcp://x': expected mcap://FILE"):
+    with pytest.raises(ConfigError, match="'chair01-seat=tcp://x': unknown scheme 'tcp' "
+                                          r"\(known: mcap, serial, ble, phone\); expected mcap://FILE"):
         open_sources(["chair01-seat=tcp://x"], "chair01", 0.0, threading.Event())
     with pytest.raises(ConfigError, match="--venue VENUE.toml is needed"):
         open_sources(["chair01-seat=serial:///dev/null"], "chair01", 0.0, threading.Event())
 
 
-def test_three_serial_devices_on_ptys_through_the_edge(game):
+def test_three_serial_devices_on_ptys_through_the_edge(game, free_endpoint):
     """x-IMU3 bytes on three real pseudo-terminals -> pyserial -> decoder -> merger -> filter."""
     from sim_devices.devices.ximu3 import SerialDevice
 
@@ -120,11 +114,10 @@ def test_three_serial_devices_on_ptys_through_the_edge(game):
         for device in devices:
             assert device.wait_done(WAIT_S)
         # unplug only once every byte has been read: bytes still in a pty when it closes are lost,
-        # as they would be on a real cable
-        deadline = time.monotonic() + WAIT_S
+        # as they would be on a real cable (an edge that ended early is caught by the assert below)
         readers = [reader for _, reader, _ in source.sources]
-        while any(r.bytes_read < d.bytes_total for r, d in zip(readers, devices)) and time.monotonic() < deadline:
-            edge.join(timeout=0.01)
+        wait_until(lambda: all(r.bytes_read >= d.bytes_total for r, d in zip(readers, devices)) or not edge.is_alive(),
+                   WAIT_S, "the edge's serial readers to read every byte the three ptys wrote")
         assert [r.bytes_read for r in readers] == [d.bytes_total for d in devices]
     finally:
         for device in devices:
@@ -140,28 +133,22 @@ def test_three_serial_devices_on_ptys_through_the_edge(game):
     np.testing.assert_allclose(summary.final_pose[:2], state.mean[:2], atol=0.05)
 
 
-# -- BLE sources through open_sources (the fake radio of test_ble_source) --------------------------
+# -- BLE sources through open_sources (the fake radio of support/ble.py) ----------------------------
 
 THINGY_LEFT, THINGY_SEAT = "F1:22:33:44:55:01", "F1:22:33:44:55:03"
 
 
 def ble_venue(tmp_path, identity: str | None = None):
     """A one-chair venue TOML with two beacons, the first with `identity` (if given)."""
-    path = tmp_path / "venue.toml"
-    line = f'identity = "{identity}"\n' if identity else ""
-    path.write_text('[venue]\nname = "court"\n'
-                    f'[[venue.beacons]]\nid = "goal-a"\nx_m = 1.575\ny_m = 7.5\n{line}'
-                    '[[venue.beacons]]\nid = "goal-b"\nx_m = 26.425\ny_m = 7.5\n'
-                    '[[agents]]\nid = "chair01"\n'
-                    '[[agents.sensors]]\nid = "chair01-left"\nmount = "left_wheel"\nspin_axis = "+z"\n'
-                    '[[agents.sensors]]\nid = "chair01-right"\nmount = "right_wheel"\nspin_axis = "-z"\n'
-                    '[[agents.sensors]]\nid = "chair01-seat"\nmount = "seat"\n')
-    return path
+    goal_a = {"id": "goal-a", "x_m": 1.575, "y_m": 7.5} | ({"identity": identity} if identity else {})
+    chair = agent_table("chair01", sensors=[sensor_table("chair01-left", "left_wheel", spin_axis="+z"),
+                                            sensor_table("chair01-right", "right_wheel", spin_axis="-z"),
+                                            sensor_table("chair01-seat", "seat")])
+    return write_venue(tmp_path / "venue.toml", "court", agents=[chair],
+                       beacons=[goal_a, {"id": "goal-b", "x_m": 26.425, "y_m": 7.5}])
 
 
 def test_ble_scan_and_thingy_through_open_sources(tmp_path):
-    from test_ble_source import BEACON_UUID, FakeRadio, FakeBleakClient, ibeacon_bytes, motion_bytes
-
     from protocol import messages
 
     radio, stop = FakeRadio(), threading.Event()
@@ -190,8 +177,6 @@ def test_ble_scan_and_thingy_through_open_sources(tmp_path):
 def test_ble_source_configuration_errors(tmp_path):
     import re
 
-    from test_ble_source import FakeRadio
-
     radio, stop = FakeRadio(), threading.Event()
     factories = {"client_factory": radio.Client, "scanner_factory": radio.Scanner}
     venue = ble_venue(tmp_path)
@@ -199,8 +184,8 @@ def test_ble_source_configuration_errors(tmp_path):
             (["rx=ble://scan"], rf"'rx=ble://scan': no beacon in {re.escape(str(venue))} has an identity .*"
                                 r"identity = .*\[\[venue.beacons\]\]"),
             ([f"chair01-seat=ble://{THINGY_SEAT}", "chair01-left=serial:///dev/null"],
-             "serial and BLE IMUs cannot be mixed on one chair .*device's clock.*host's"),
-            (["rx=ble://scan", "chair01-left=serial:///dev/null"], "ble://scan goes with BLE IMUs only"),
+             "ble and serial sources cannot be mixed on one edge: .*device's clock.*host's"),
+            (["rx=ble://scan", "chair01-left=serial:///dev/null"], "ble and serial sources cannot be mixed"),
             ([f"chair01-seat=ble://{THINGY_SEAT}", f"chair01-seat=ble://{THINGY_LEFT}"],
              "'chair01-seat' is given twice"),
             ([f"chair09-seat=ble://{THINGY_SEAT}"], "chair01 has no sensor 'chair09-seat'"),

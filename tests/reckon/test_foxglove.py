@@ -14,18 +14,18 @@ import foxglove.messages
 import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
-from test_court_view import CHAIRS, STEP_NS, T0_NS, chair_xy, pose, session
 
 from protocol import bus as wire
 from protocol import keys, messages
 from protocol.session_log import read_description
 from reckon.transport.bus import Publisher, flush, open_session, wait_for_peers, zenoh_config
 from reckon.cli import main
-from reckon.tools.demo import free_endpoint
 from reckon.tools.foxglove import DECIMATE_NS, export_foxglove
 from reckon.processes.hub import run_hub
-from sim_devices.wheelchair.session import simulate
+from support.court import CHAIRS, STEP_NS, T0_NS, chair_xy, pose, session
+from support.games import Game
 
+GAME = Game(players=2, duration_s=5.0, seed=3)
 WAIT_S = 30.0
 FOXGLOVE_SCHEMAS = {f"foxglove.{name}" for name in dir(foxglove.messages) if name[0].isupper()}
 
@@ -70,14 +70,7 @@ def decode_all(path: Path) -> dict[str, list]:
 
 
 @pytest.fixture(scope="module")
-def game(tmp_path_factory) -> Path:
-    path = tmp_path_factory.mktemp("fox") / "game.mcap"
-    simulate(2, 5.0, 3, path)
-    return path
-
-
-@pytest.fixture(scope="module")
-def hub_recording(tmp_path_factory) -> Path:
+def hub_recording(tmp_path_factory, free_endpoint) -> Path:
     """A real hub's recording: three chairs' edge poses and an operator's fix in, live and refined out."""
     path = tmp_path_factory.mktemp("fox") / "hub.mcap"
     endpoint, stop, ready = free_endpoint(), threading.Event(), threading.Event()
@@ -98,6 +91,7 @@ def hub_recording(tmp_path_factory) -> Path:
         assert flush(bus, wire.alive_selector("court", wire.Role.HUB), WAIT_S)
     stop.set()
     hub.join(WAIT_S)
+    assert not hub.is_alive()
     return path
 
 

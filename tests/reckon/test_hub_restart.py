@@ -27,21 +27,15 @@ from protocol import bus as wire
 from protocol import keys, messages
 from protocol.session_log import LogMessages, read_description
 from reckon.transport.bus import Subscription, open_session, zenoh_config
-from reckon.tools.demo import free_endpoint
 from reckon.processes.edge import mcap_source, run_edge
 from reckon.processes.hub import FLUSH_EVERY_S, SNAPSHOT_EVERY_S, run_hub
 from reckon.transport.spool import read_records
-from sim_devices.wheelchair import simulate
+from support.games import Game
 
+GAME = Game(players=2, duration_s=8.0, seed=5)
+RESTARTED_GAME = Game(players=3, duration_s=20.0, seed=6)  # the hub killed and restarted in its middle
 WAIT_S = 120.0
 INPUT_TYPES = ("ImuBatch", "BeaconSighting", "EstimatedPose", "ImpactEvent")
-
-
-@pytest.fixture(scope="module")
-def game(tmp_path_factory):
-    path = tmp_path_factory.mktemp("faults") / "game.mcap"
-    simulate(players=2, duration_s=8.0, seed=5, output=path)
-    return path
 
 
 class HubThread:
@@ -94,7 +88,7 @@ def raw(inputs) -> list:
     return [(t, m) for t, m in inputs if messages.type_name(m) in ("ImuBatch", "BeaconSighting")]
 
 
-def test_an_edge_with_no_hub_spools_and_a_hub_started_later_gets_every_message_once(game, tmp_path):
+def test_an_edge_with_no_hub_spools_and_a_hub_started_later_gets_every_message_once(game, free_endpoint, tmp_path):
     session = read_description(game)
     agent_id = session.agents[0].id
     endpoint, spool = free_endpoint(), tmp_path / "spool"
@@ -137,7 +131,7 @@ def test_an_edge_with_no_hub_spools_and_a_hub_started_later_gets_every_message_o
         last[stream] = m.timestamp_ns
 
 
-def test_a_spool_left_by_an_edge_that_stopped_is_replayed_by_its_next_start(game, tmp_path):
+def test_a_spool_left_by_an_edge_that_stopped_is_replayed_by_its_next_start(game, free_endpoint, tmp_path):
     session = read_description(game)
     agent_id = session.agents[1].id
     endpoint, spool = free_endpoint(), tmp_path / "spool"
@@ -195,9 +189,8 @@ def live(items) -> list:
     return [m for _, m in items if messages.type_name(m) == "EstimatedPose"]
 
 
-def test_a_hub_killed_and_restarted_rebuilds_its_state_and_contradicts_nothing(tmp_path, capsys):
-    game = tmp_path / "game.mcap"
-    simulate(players=3, duration_s=20.0, seed=6, output=game)
+def test_a_hub_killed_and_restarted_rebuilds_its_state_and_contradicts_nothing(games, free_endpoint, tmp_path, capsys):
+    game = games.path(RESTARTED_GAME)
     session = read_description(game)
     venue = session.venue.name
     endpoint = free_endpoint()
@@ -361,7 +354,7 @@ def test_the_restarted_hub_never_overwrites_a_recording(tmp_path):
     assert hub_state.next_recording(tmp_path / "hub.mcap") == tmp_path / "hub.2.mcap"
 
 
-def test_a_state_file_needs_a_recording(game, tmp_path):
+def test_a_state_file_needs_a_recording(game, free_endpoint, tmp_path):
     from protocol.errors import ConfigError
 
     with pytest.raises(ConfigError, match="needs a recording"):

@@ -18,33 +18,22 @@ from protocol.errors import ConfigError, InputError, ReckonError
 from protocol.session_log import read_session
 from reckon.importers import import_csv_folder
 from reckon.importers.report import EXAMPLES_PER_FILE
+from support.venue import agent_table, sensor_table, venue_toml, write_venue
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "docs/examples/csv-session"
 G = 9.80665
 
-SESSION = """
-[venue]
-name = "gym"
+SEAT = sensor_table("seat", "seat", rate_hz=100.0)
+LEFT = sensor_table("left", "left_wheel", spin_axis="+z", rate_hz=100.0)
 
-[[venue.beacons]]
-id = "b1"
-x_m = 0.0
-y_m = 0.0
 
-[[agents]]
-id = "c1"
+def session_toml(sensors: tuple[dict, ...] = (SEAT, LEFT), **chair: object) -> str:
+    """A folder's session.toml: the gym with beacon b1 and chair c1 (`chair`: more keys of its table)."""
+    return venue_toml("gym", agents=[agent_table("c1", sensors=list(sensors), **chair)],
+                      beacons=[{"id": "b1", "x_m": 0.0, "y_m": 0.0}])
 
-[[agents.sensors]]
-id = "seat"
-mount = "seat"
-rate_hz = 100.0
 
-[[agents.sensors]]
-id = "left"
-mount = "left_wheel"
-spin_axis = "+z"
-rate_hz = 100.0
-"""
+SESSION = session_toml()
 HEADER = "time_s,accel_x_g,accel_y_g,accel_z_g,gyro_x_dps,gyro_y_dps,gyro_z_dps"
 
 
@@ -338,13 +327,13 @@ def test_two_files_for_one_sensor(tmp_path: Path) -> None:
 
 
 def test_two_toml_sensors_with_one_id(tmp_path: Path) -> None:
-    session = SESSION + '\n[[agents.sensors]]\nid = "left"\nmount = "right_wheel"\nspin_axis = "-z"\n'
+    session = session_toml((SEAT, LEFT, sensor_table("left", "right_wheel", spin_axis="-z")))
     message = import_error(tmp_path, ConfigError, session=session)
     assert "session.toml" in message and "duplicate sensor id 'left'" in message
 
 
 def test_unknown_toml_key_is_the_config_error_of_load_toml(tmp_path: Path) -> None:
-    message = import_error(tmp_path, ConfigError, session=SESSION.replace('id = "c1"', 'id = "c1"\nwheel_size = 0.6'))
+    message = import_error(tmp_path, ConfigError, session=session_toml(wheel_size=0.6))
     assert "session.toml" in message and "wheel_size: unknown key" in message
 
 
@@ -457,18 +446,6 @@ def test_every_accepted_unit_is_documented() -> None:
     assert [unit for unit in units if f"`{unit}`" not in doc] == []
 
 
-PHONE_TOML = """\
-[venue]
-name = "hall"
-stands = [{id = "door", x_m = 2.0, y_m = 5.0, heading_deg = 0.0}]
-
-[[agents]]
-id = "walker"
-kind = "pedestrian"
-sensors = [{id = "phone", mount = "hand", rate_hz = 50.0}]
-"""
-
-
 def test_a_phone_walk_with_its_stand_imports_and_evaluates(tmp_path: Path, capsys) -> None:
     """Any phone app's export: the phone's CSV, when it lay on the stand, and the truth; `reckon
     eval` then scores it as a pedestrian walk (the walker steps along +x at 1.8 Hz, 0.7 m a step)."""
@@ -476,7 +453,8 @@ def test_a_phone_walk_with_its_stand_imports_and_evaluates(tmp_path: Path, capsy
 
     folder = tmp_path / "walk"
     folder.mkdir()
-    (folder / "session.toml").write_text(PHONE_TOML)
+    write_venue(folder / "session.toml", "hall", stands=[{"id": "door", "x_m": 2.0, "y_m": 5.0, "heading_deg": 0.0}],
+                agents=[agent_table("walker", "pedestrian", sensors=[sensor_table("phone", "hand", rate_hz=50.0)])])
     rows = ["time_s,accel_x_mps2,accel_y_mps2,accel_z_mps2,gyro_x_radps,gyro_y_radps,gyro_z_radps"]
     for i in range(50 * 20):
         t = i / 50.0

@@ -13,17 +13,8 @@ from protocol.session_log import read_session
 from reckon.cli import main
 from reckon.importers.tracks_csv import import_tracks_csv
 from sim_devices.camera import ROOM, camera_items, extra_people, simulate_tracks
+from support.venue import agent_table, write_venue
 
-SESSION_TOML = """
-[venue]
-name = "room"
-court_length_m = 5.6
-court_width_m = 3.0
-
-[[agents]]
-id = "walker1"
-kind = "pedestrian"
-"""
 START_NS = 1_718_000_000 * 1_000_000_000
 
 
@@ -53,9 +44,8 @@ def _write_csv(path: Path, recording, time_column: bool = True) -> Path:
 
 @pytest.fixture
 def session_toml(tmp_path: Path) -> Path:
-    path = tmp_path / "room.toml"
-    path.write_text(SESSION_TOML, encoding="utf-8")
-    return path
+    return write_venue(tmp_path / "room.toml", "room", court_length_m=5.6, court_width_m=3.0,
+                       agents=[agent_table("walker1", "pedestrian")])
 
 
 def test_round_trip_with_a_time_column(recording, tmp_path: Path, session_toml: Path):

@@ -14,30 +14,18 @@ from protocol.session import AgentKind, Mount
 from protocol.session_log import read_session
 from reckon.cli import main
 from reckon.importers.tsnd_csv import import_tsnd_csv
+from support.venue import agent_table, sensor_table, write_venue
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "examples" / "tsnd"
 DAY_MS = 86_400_000
-SWIMMERS_TOML = """
-[venue]
-name = "pool"
-court_length_m = 50.0
-[[agents]]
-id = "{first}"
-kind = "swimmer"
-[[agents.sensors]]
-id = "{first}-head"
-mount = "head"
-[[agents.sensors]]
-id = "{first}-waist"
-mount = "waist"
-rate_hz = 1000.0
-[[agents]]
-id = "other"
-kind = "swimmer"
-[[agents.sensors]]
-id = "other-waist"
-mount = "waist"
-"""
+
+
+def swimmers_venue(path: Path, first: str) -> Path:
+    """A 50 m pool with two swimmers: `first` (head and 1000 Hz waist sensors), then "other" (a waist sensor)."""
+    return write_venue(path, "pool", court_length_m=50.0, agents=[
+        agent_table(first, "swimmer", sensors=[sensor_table(f"{first}-head", "head"),
+                                               sensor_table(f"{first}-waist", "waist", rate_hz=1000.0)]),
+        agent_table("other", "swimmer", sensors=[sensor_table("other-waist", "waist")])])
 
 
 def write(tmp_path: Path, lines: list[str], name="swim.csv") -> Path:
@@ -101,8 +89,7 @@ def test_magnetometer_left_out_when_samples_have_no_reading_near(tmp_path):
 
 
 def test_toml_picks_the_agent_and_its_waist_sensor(tmp_path):
-    toml = tmp_path / "pool.toml"
-    toml.write_text(SWIMMERS_TOML.format(first="ben"), encoding="utf-8")
+    toml = swimmers_venue(tmp_path / "pool.toml", first="ben")
     csv = write(tmp_path, [ags(tick) for tick in range(100)])
     assert main(["import", "tsnd", str(csv), "--venue", str(toml), "--agent", "ben", "-o",
                  str(tmp_path / "out.mcap")]) == 0

@@ -18,21 +18,13 @@ from protocol import messages
 from protocol import bus as wire
 from protocol.session_log import read_session
 from reckon.transport.bus import open_session, wait_for_peers, zenoh_config
-from reckon.tools.demo import free_endpoint
 from reckon.processes.edge import mcap_source, run_edge
 from reckon.evaluation.reckon_run import log_inputs, run_lockstep
 from reckon.processes.hub import run_hub
-from sim_devices.wheelchair import simulate
+from support.games import Game
 
+GAME = Game(players=4, duration_s=30.0, seed=3)
 WAIT_S = 120.0
-
-
-
-@pytest.fixture(scope="module")
-def game(tmp_path_factory):
-    path = tmp_path_factory.mktemp("live") / "game.mcap"
-    simulate(players=4, duration_s=30.0, seed=3, output=path)
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +89,7 @@ def errors_against_truth(data, live: dict[str, np.ndarray]) -> dict[str, float]:
     return out
 
 
-def test_edges_into_hub_corrected_poses_and_collision_pairs(game, data, tmp_path):
+def test_edges_into_hub_corrected_poses_and_collision_pairs(game, data, free_endpoint, tmp_path):
     endpoint = free_endpoint()
     session = data.session
     hub = Hub(endpoint, session, output=tmp_path / "hub.mcap")
@@ -132,7 +124,7 @@ def test_edges_into_hub_corrected_poses_and_collision_pairs(game, data, tmp_path
     assert (tmp_path / "hub.mcap").stat().st_size > 0
 
 
-def test_hub_started_after_the_edges_picks_them_up(game, data):
+def test_hub_started_after_the_edges_picks_them_up(game, data, free_endpoint):
     endpoint = free_endpoint()
     session = data.session
     # paced, so the game is still going when the hub joins; the edges do not wait for a hub
@@ -151,7 +143,7 @@ def test_hub_started_after_the_edges_picks_them_up(game, data):
     assert max(errors_against_truth(data, live).values()) < 1.5
 
 
-def test_a_device_that_drops_out_and_returns_resumes_without_a_restart(game, data):
+def test_a_device_that_drops_out_and_returns_resumes_without_a_restart(game, data, free_endpoint):
     endpoint = free_endpoint()
     session = data.session
     gone = session.agents[0].id

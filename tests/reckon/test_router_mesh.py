@@ -26,8 +26,8 @@ from protocol import keys, messages
 from protocol.session import load_toml
 from protocol.session_log import LogMessages
 from reckon.transport.bus import Alive, BusError, Publisher, Subscription, flush, open_session, wait_for_peers, zenoh_config_from_file
-from reckon.tools.demo import free_endpoint
 from reckon.processes.hub import run_hub
+from support.venue import agent_table, sensor_table, write_venue
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 WAIT_S = 30.0  # upper bound for a ready signal; never reached when things work
@@ -70,12 +70,12 @@ def make_ca(root: Path) -> Path:
 class Venues:
     """One router for the venues given, on a free port: its certificate, generated access files, config.
 
-    `name`: the router's certificate name; `access_args`: more make-venue-access.py options;
+    `endpoint`: a free tcp endpoint (the router listens there, with tls/); `name`: the router's certificate name; `access_args`: more make-venue-access.py options;
     `dial`: (router, user name) to connect to another router of a mesh with that router's password.
     """
 
-    def __init__(self, root: Path, venues: dict[str, list[str]], tls: Path | None = None, name: str = "router",
-                 access_args: tuple[str, ...] = (), dial: tuple["Venues", str] | None = None):
+    def __init__(self, root: Path, venues: dict[str, list[str]], endpoint: str, tls: Path | None = None,
+                 name: str = "router", access_args: tuple[str, ...] = (), dial: tuple["Venues", str] | None = None):
         self.root, self.venues = root, venues
         self.tls = tls or make_ca(root)
         subprocess.run([str(DEPLOY / "make-certs.sh"), str(self.tls), "server", name, "127.0.0.1"], check=True,
@@ -84,7 +84,7 @@ class Venues:
         specs = [f"{venue}={','.join(agents)}" for venue, agents in venues.items()]
         load_generator().main([arg for spec in specs for arg in ("--venue", spec)] + list(access_args)
                               + ["-o", str(self.access)])
-        self.endpoint = free_endpoint().replace("tcp/", "tls/")
+        self.endpoint = endpoint.replace("tcp/", "tls/")
         login = None if dial is None else (dial[1], load_generator().read_users(dial[0].access / "users.txt")[dial[1]])
         router_file = rewrite(self.access / "router.json5", root / f"{name}.json5", self.tls,
                               users=self.access / "users.txt", login=login, certificate=name)
@@ -106,12 +106,9 @@ class Venues:
 
 
 def session_toml(path: Path, venue: str, agents: list[str]) -> Path:
-    text = f'[venue]\nname = "{venue}"\ncourt_length_m = 28.0\ncourt_width_m = 15.0\n'
-    for agent in agents:
-        text += f'\n[[agents]]\nid = "{agent}"\nwheel_diameter_m = 0.61\n'
-        text += f'\n[[agents.sensors]]\nid = "{agent}-seat"\nmount = "seat"\nrate_hz = 100.0\n'
-    path.write_text(text)
-    return path
+    chairs = [agent_table(agent, wheel_diameter_m=0.61, sensors=[sensor_table(f"{agent}-seat", "seat", rate_hz=100.0)])
+              for agent in agents]
+    return write_venue(path, venue, agents=chairs, court_length_m=28.0, court_width_m=15.0)
 
 
 def batch(agent: str, sequence: int = 0):
@@ -123,8 +120,8 @@ def correction(agent: str, dx_m: float):
     return messages.new("Correction", timestamp_ns=1, agent_id=agent, dx_m=dx_m)
 
 
-def test_wrong_password_or_unknown_user_cannot_open_a_session(tmp_path):
-    venues = Venues(tmp_path, {"court1": ["chair1"]})
+def test_wrong_password_or_unknown_user_cannot_open_a_session(free_endpoint, tmp_path):
+    venues = Venues(tmp_path, {"court1": ["chair1"]}, free_endpoint())
     with open_session(venues.router_config):
         with open_session(venues.client("court1", "edge-chair1")):  # the right password opens
             pass
@@ -136,9 +133,9 @@ def test_wrong_password_or_unknown_user_cannot_open_a_session(tmp_path):
                 pass
 
 
-def test_an_edge_publishes_only_under_its_own_agent_and_never_the_hubs_outputs(tmp_path):
+def test_an_edge_publishes_only_under_its_own_agent_and_never_the_hubs_outputs(free_endpoint, tmp_path):
     venue = "court1"
-    venues = Venues(tmp_path, {venue: ["chair1", "chair2"]})
+    venues = Venues(tmp_path, {venue: ["chair1", "chair2"]}, free_endpoint())
     with open_session(venues.router_config), \
             open_session(venues.client(venue, "hub")) as hub_bus, \
             Subscription(hub_bus, f"reckon/{venue}/**") as observed, \
@@ -160,9 +157,9 @@ def test_an_edge_publishes_only_under_its_own_agent_and_never_the_hubs_outputs(t
         assert [observed.get(timeout=WAIT_S).key for _ in allowed] == allowed
 
 
-def test_only_the_hub_reaches_an_edges_corrections_and_an_edge_hears_only_its_own(tmp_path):
+def test_only_the_hub_reaches_an_edges_corrections_and_an_edge_hears_only_its_own(free_endpoint, tmp_path):
     venue = "court1"
-    venues = Venues(tmp_path, {venue: ["chair1", "chair2"]})
+    venues = Venues(tmp_path, {venue: ["chair1", "chair2"]}, free_endpoint())
     with open_session(venues.router_config), \
             open_session(venues.client(venue, "edge-chair2")) as edge_bus, \
             Subscription(edge_bus, [keys.correction(venue, "chair1"), keys.correction(venue, "chair2")]) as heard, \
@@ -215,18 +212,18 @@ def run_two_hubs(tmp_path: Path, hub_router: dict[str, Venues], edge_router: dic
         assert topics == [(f"reckon/{venue}/chair1/imu/chair1-seat", sequence) for sequence in range(counts[venue])]
 
 
-def test_two_hubs_of_two_venues_through_one_router_each_get_only_their_venue(tmp_path):
-    venues = Venues(tmp_path, {"court1": ["chair1"], "court2": ["chair1"]})
+def test_two_hubs_of_two_venues_through_one_router_each_get_only_their_venue(free_endpoint, tmp_path):
+    venues = Venues(tmp_path, {"court1": ["chair1"], "court2": ["chair1"]}, free_endpoint())
     with open_session(venues.router_config):
         run_two_hubs(tmp_path, {"court1": venues, "court2": venues}, {"court1": venues, "court2": venues})
 
 
-def test_two_routers_in_a_mesh_carry_each_venue_to_its_hub_across_them(tmp_path):
+def test_two_routers_in_a_mesh_carry_each_venue_to_its_hub_across_them(free_endpoint, tmp_path):
     """Router b dials router a; each hub is on one router, each venue's edge on the other one."""
     both = {"court1": ["chair1"], "court2": ["chair1"]}
     tls = make_ca(tmp_path)
-    a = Venues(tmp_path, both, tls, name="router-a", access_args=("--peer-router", "router.b"))
-    b = Venues(tmp_path, both, tls, name="router-b", access_args=("--dialed-router", "router-a"),
+    a = Venues(tmp_path, both, free_endpoint(), tls, name="router-a", access_args=("--peer-router", "router.b"))
+    b = Venues(tmp_path, both, free_endpoint(), tls, name="router-b", access_args=("--dialed-router", "router-a"),
                dial=(a, "router.b"))
     with open_session(a.router_config), open_session(b.router_config):
         run_two_hubs(tmp_path, {"court1": a, "court2": b}, {"court1": b, "court2": a})

@@ -14,7 +14,6 @@ from protocol import messages
 from protocol.session import Route
 from protocol.session_log import LogMessages, read_session
 from reckon.transport.bus import zenoh_config
-from reckon.tools.demo import free_endpoint
 from reckon.processes.edge import mcap_source, run_edge
 from reckon.processes.hub import run_hub
 from edge.swim.edge import SwimEdge
@@ -39,7 +38,7 @@ def offline_lengths(path, agent):
     return out + edge.flush()
 
 
-def test_lengths_reach_the_hub_as_the_edges_computed_them(swim_log, tmp_path):
+def test_lengths_reach_the_hub_as_the_edges_computed_them(swim_log, free_endpoint, tmp_path):
     data = read_session(swim_log)
     session = data.session
     endpoint = free_endpoint()

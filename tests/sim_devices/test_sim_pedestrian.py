@@ -201,6 +201,7 @@ def test_scans_in_the_log_carry_the_stand_fields(paper_log: Path):
     data = read_session(paper_log)
     stand = data.session.venue.stands[0]
     key = bytes.fromhex(data.session.source["stand_key_hex"])
+    assert len(data.scans["p01"]) > 0  # the walk starts at a stand, so there is something to check
     for scan in data.scans["p01"]:
         assert stand_code.decode(scan.payload, data.session.venue.name, key, data.session.venue.stands) == stand
         assert (scan.x_m, scan.y_m, scan.heading_rad, scan.tilt_rad) == pytest.approx(

@@ -159,15 +159,18 @@ def test_a_seated_head_is_lower_for_the_camera(walk_and_imu):
 
 def test_standing_still_reads_one_g_and_no_rotation(walk_and_imu):
     _, motion, imus = walk_and_imu
+    checked = 0
     for index, imu in enumerate(imus):
         body = motion.bodies[index]
         still = (motion.plan.activity[:, index] == Activity.STAND) & (body.stepping_speed_mps < 0.01)
         if still.sum() < 50:
             continue
+        checked += 1
         norm = np.linalg.norm(imu.accel_g[still], axis=1)
         assert abs(norm.mean() - 1.0) < 0.05  # biases +-15 mg per axis, scale 0.5 %
         assert norm.std() < 0.01
         assert np.abs(imu.gyro_dps[still]).mean() < 3.0  # bias 0.5 deg/s SD per axis
+    assert checked > 0, "nobody stood still for half a second: the test checked nothing"
 
 
 def test_sensor_axes_are_forward_left_up():

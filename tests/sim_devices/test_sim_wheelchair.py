@@ -18,26 +18,25 @@ from protocol.session_log import SessionData, read_session
 from sim_devices.wheelchair import SimParams, describe, error_free, params_with_overrides, simulate
 from sim_devices.wheelchair.kinematics import STANDARD_GRAVITY, ChairBuild, wheel_imu
 from sim_devices.wheelchair.motion import Motion, simulate_motion
+from support.games import Game
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "simulator.md"
 PLAYERS, DURATION_S = 4, 30.0
+GAME = Game(PLAYERS, DURATION_S, seed=11)  # a short game with every default error on
+# every sensor, wheel, radio and clock error off; three times the blocks, so 30 s has many contacts
+IDEAL = Game(PLAYERS, DURATION_S, seed=12, overrides=(("game.block_rate_per_min", "6"),), error_free=True)
 
 
 @pytest.fixture(scope="module")
-def game(tmp_path_factory: pytest.TempPathFactory) -> tuple[SessionData, object]:
-    """A short game with every default error on."""
-    path = tmp_path_factory.mktemp("sim") / "game.mcap"
-    summary = simulate(PLAYERS, DURATION_S, 11, path)
-    return read_session(path), summary
+def default_game(game, games) -> tuple[SessionData, object]:
+    """GAME read back, and what the simulator said about it."""
+    return read_session(game), games.summary(GAME)
 
 
 @pytest.fixture(scope="module")
-def ideal(tmp_path_factory: pytest.TempPathFactory) -> tuple[SessionData, object]:
-    """Every sensor, wheel, radio and clock error off; three times the blocks, so 30 s has many contacts."""
-    path = tmp_path_factory.mktemp("sim") / "ideal.mcap"
-    summary = simulate(PLAYERS, DURATION_S, 12, path,
-                       params_with_overrides({"game.block_rate_per_min": "6"}, error_free()))
-    return read_session(path), summary
+def ideal(games) -> tuple[SessionData, object]:
+    """IDEAL read back, and what the simulator said about it."""
+    return read_session(games.path(IDEAL)), games.summary(IDEAL)
 
 
 def _records(path: Path) -> list[tuple[str, int, bytes]]:
@@ -63,8 +62,8 @@ def test_same_seed_gives_identical_messages_and_another_seed_differs(tmp_path: P
     assert first != other
 
 
-def test_log_reads_back_with_every_sensor_beacon_and_truth(game):
-    data, summary = game
+def test_log_reads_back_with_every_sensor_beacon_and_truth(default_game):
+    data, summary = default_game
     assert data.problems == []
     venue = data.session.venue
     assert (venue.name, venue.court_length_m, venue.court_width_m) == ("court", 28.0, 15.0)
@@ -113,20 +112,20 @@ def motion() -> Motion:
     return simulate_motion(6, 60.0, SimParams(), np.random.default_rng(21))
 
 
-def test_speeds_yaw_rates_and_positions_stay_physical(motion: Motion, game):
+def test_speeds_yaw_rates_and_positions_stay_physical(motion: Motion, default_game):
     params = SimParams()
     assert np.abs(motion.speed_mps).max() <= 4.6
     assert motion.speed_mps.max() > 3.0  # they do sprint
     assert motion.speed_mps.min() < -0.3  # and push backward
     assert np.degrees(np.abs(motion.yaw_roll_rps)).max() <= params.chair.yaw_rate_max_dps + 1e-9
     assert np.degrees(np.abs(motion.yaw_roll_rps)).max() > 200.0  # pivots
-    for truth in game[0].truth.values():
+    for truth in default_game[0].truth.values():
         assert -1.0 <= truth.x_m.min() and truth.x_m.max() <= 29.0
         assert -1.0 <= truth.y_m.min() and truth.y_m.max() <= 16.0
 
 
-def test_readings_respect_the_sensor_ranges(game, tmp_path: Path):
-    for series in game[0].imu.values():
+def test_readings_respect_the_sensor_ranges(default_game, tmp_path: Path):
+    for series in default_game[0].imu.values():
         assert np.abs(series.gyro_dps).max() <= 1500.0
         assert np.abs(series.accel_g).max() <= 16.0
     path = tmp_path / "narrow.mcap"
@@ -135,8 +134,8 @@ def test_readings_respect_the_sensor_ranges(game, tmp_path: Path):
     assert np.abs(wheel.gyro_dps).max() == pytest.approx(300.0)  # clipped at the range, not beyond
 
 
-def test_seat_reads_one_g_when_the_chair_is_still(game):
-    data = game[0]
+def test_seat_reads_one_g_when_the_chair_is_still(default_game):
+    data = default_game[0]
     still_samples = 0
     for agent in data.session.agents:
         truth = data.truth[agent.id]
@@ -224,10 +223,10 @@ def test_seat_magnetometer_gives_the_true_heading_without_errors(ideal):
         assert np.linalg.norm(seat.mag_gauss, axis=1).mean() == pytest.approx(0.46, abs=0.01)
 
 
-def test_device_clocks_follow_their_documented_model(game, ideal):
+def test_device_clocks_follow_their_documented_model(default_game, ideal):
     true_times = set(ideal[0].truth["chair01"].time_ns.tolist())
     assert true_times <= set(ideal[0].imu["chair01-seat"].time_ns.tolist())  # no clock error: true times
-    data = game[0]
+    data = default_game[0]
     epoch = data.session.source["params"]["clock"]["start_unix_s"] * 1_000_000_000
     offsets = []
     for sensor_id, series in data.imu.items():
@@ -240,8 +239,8 @@ def test_device_clocks_follow_their_documented_model(game, ideal):
     assert len(set(offsets)) == len(offsets) and 0 < np.std(offsets) < 0.05
 
 
-def test_beacons_are_heard_louder_under_their_goal(game):
-    data = game[0]
+def test_beacons_are_heard_louder_under_their_goal(default_game):
+    data = default_game[0]
     near, far = [], []
     for agent_id, seen in data.sightings.items():
         truth = data.truth[agent_id]
@@ -274,9 +273,9 @@ def test_contacts_spike_both_seats_and_harder_ones_spike_more(ideal):
     assert np.corrcoef(closing, peaks)[0, 1] > 0.3
 
 
-def test_default_contact_rate_is_a_few_per_player_per_minute(game):
-    assert 1.0 <= game[1].contacts_per_player_per_min <= 10.0
-    assert game[1].jolts > 0  # non-contact spikes exist with default errors
+def test_default_contact_rate_is_a_few_per_player_per_minute(default_game):
+    assert 1.0 <= default_game[1].contacts_per_player_per_min <= 10.0
+    assert default_game[1].jolts > 0  # non-contact spikes exist with default errors
 
 
 # -- parameters -------------------------------------------------------------------------------------

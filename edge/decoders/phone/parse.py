@@ -1,5 +1,6 @@
 """Parsing what a phone sends (docs/phone.md): the browser page's WebSocket JSON and the Sensor
-Logger app's HTTP push, into samples for edge/decoders/phone/samples.py. Pure: no socket, no clock.
+Logger app's HTTP push, into samples for edge/decoders/phone/samples.py (and camera frames for
+edge/decoders/phone/qr_frame.py). Pure: no socket, no clock.
 
 A message that cannot be used whole raises PhoneInputError(reason); a value that is null, NaN or
 not a number becomes NaN and a time that is not one becomes -1, for the batcher to count and drop.
@@ -7,6 +8,8 @@ not a number becomes NaN and a time that is not one becomes -1, for the batcher 
 
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 import math
 from typing import Any
@@ -67,12 +70,31 @@ def _rows(data: Any, key: str, width: int, where: str) -> list[list[Any]]:
     return rows
 
 
+def _frame(data: dict[str, Any]) -> tuple[int, bytes, int, int]:
+    """A camera frame's envelope -> (time_ns, JPEG bytes, width px, height px); the pixels are
+    edge/decoders/phone/qr_frame.py's to check."""
+    t_ms = as_number(data.get("t"))
+    if not math.isfinite(t_ms) or t_ms < 0:
+        raise PhoneInputError(f"frame: \"t\" must be epoch milliseconds, got {data.get('t')!r:.40}")
+    width, height, encoded = data.get("width"), data.get("height"), data.get("jpeg")
+    if not all(isinstance(side, int) and not isinstance(side, bool) for side in (width, height)):
+        raise PhoneInputError(f"frame: \"width\" and \"height\" must be whole pixels, got {width!r:.20}, {height!r:.20}")
+    if not isinstance(encoded, str):
+        raise PhoneInputError(f"frame: \"jpeg\" must be base64 text, got {type(encoded).__name__}")
+    try:
+        jpeg = base64.b64decode(encoded, validate=True)
+    except binascii.Error as error:
+        raise PhoneInputError(f"frame: \"jpeg\" is not base64 ({error})") from None
+    return epoch_ms_to_ns(t_ms), jpeg, width, height
+
+
 def parse_browser(text: str | bytes) -> tuple[str, Any]:
     """One page message -> ("motion", [Sample-like rows]) | ("orientation", rows) | ("scan", (time_ns, text))
-    | ("hello", dict). Motion rows are [t_ms, ax, ay, az, alpha, beta, gamma, interval_ms] with
-    t_ms the phone's epoch milliseconds; returned as (time_ns, accel_ms2, gyro_dps, None) with the
-    rotation rate mapped to phone axes (x = beta, y = gamma, z = alpha); non-finite values stay NaN
-    for the batcher to count. PhoneInputError for a message that is not one of these."""
+    | ("frame", (time_ns, jpeg bytes, width, height)) | ("hello", dict). Motion rows are [t_ms, ax,
+    ay, az, alpha, beta, gamma, interval_ms] with t_ms the phone's epoch milliseconds; returned as
+    (time_ns, accel_ms2, gyro_dps, None) with the rotation rate mapped to phone axes (x = beta,
+    y = gamma, z = alpha); non-finite values stay NaN for the batcher to count. PhoneInputError for
+    a message that is not one of these."""
     data = _json(text)
     if not isinstance(data, dict) or not isinstance(data.get("type"), str):
         raise PhoneInputError("expected a JSON object with a \"type\"")
@@ -94,9 +116,11 @@ def parse_browser(text: str | bytes) -> tuple[str, Any]:
         if not isinstance(scanned, str) or not 0 < len(scanned) <= SCAN_TEXT_CHARS:
             raise PhoneInputError(f"scan: \"text\" must be 1-{SCAN_TEXT_CHARS} characters")
         return kind, (epoch_ms_to_ns(t_ms), scanned)
+    if kind == "frame":
+        return kind, _frame(data)
     if kind == "hello":
         return kind, data
-    raise PhoneInputError(f"unknown message type {kind!r:.40} (expected motion, orientation, scan, hello)")
+    raise PhoneInputError(f"unknown message type {kind!r:.40} (expected motion, orientation, scan, frame, hello)")
 
 
 SENSOR_LOGGER_NAMES = {"accelerometer": "accel", "totalacceleration": "accel", "gyroscope": "gyro",

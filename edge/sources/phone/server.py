@@ -7,27 +7,33 @@ takes the Sensor Logger app's HTTP push (docs/phone.md).
 
 Routes: `/` the page (edge/sources/phone/page/), `/static/...`, `/ca.pem` (the CA a phone trusts once),
 `/ws` the page's WebSocket, `POST /sensorlogger` the app's push. The aiohttp server runs on its
-own thread and event loop; what it decodes (edge/decoders/phone/parse.py, phone_samples.py) goes into a blocking queue
-that never drops: when the consumer falls behind, the server stops reading, and the phone's TCP
-connection slows down. Bad input is counted (`counters`), summarised in at most one WARNING per
+own thread and event loop (edge/sources/background_server.py); what it decodes
+(edge/decoders/phone/parse.py, samples.py) goes into a blocking queue that never drops
+(edge/sources/threaded.py): when the consumer falls behind, the server stops reading, and the
+phone's TCP connection slows down. Bad input is counted (`counters`), summarised in at most one WARNING per
 WARN_EVERY_S and sent back to the page; it never stops the server.
 
 URL query keys: `tls_dir` (the certificate folder, default `<venue file folder>/phone-tls`;
-phone_tls.py), `key_file` (the venue's stand key, default `<venue file folder>/<venue>.standkey`),
+tls.py), `key_file` (the venue's stand key, default `<venue file folder>/<venue>.standkey`),
 `http_port` (also serve the Sensor Logger push over plain HTTP on this port: the app does not
 trust a self-signed certificate; 0 = an ephemeral port; absent = HTTPS only).
+
+Registered as the `phone` scheme (edge/sources/registry.py), with the doctor's `check_phone`.
 """
 
 from __future__ import annotations
 
 import asyncio
+import datetime
+import errno
 import json
 import logging
 import queue
+import socket
 import ssl
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
@@ -37,9 +43,15 @@ from aiohttp import WSMsgType, web
 from protocol import messages
 from protocol.errors import ConfigError
 from protocol.session import Session
-from protocol.stand_code import load_key, scan_message
+from protocol.stand_code import scan_message
+from edge.sources.phone.stand_key import key_path as stand_key_path
+from edge.sources.phone.stand_key import load_key
+from edge.sources.background_server import BackgroundServer
 from edge.sources.phone import tls as phone_tls
+from edge.sources.registry import CheckRequest, Finding, Level, OpenRequest, Scheme, live_session
+from edge.sources.threaded import ThreadedSource
 from edge.decoders.phone.parse import PhoneInputError, parse_browser, parse_sensor_logger
+from edge.decoders.phone.qr_frame import QrFrameReader
 from edge.decoders.phone.rotation import RotationUnitCheck
 from edge.decoders.phone.samples import Aligner, Counters, MotionBatcher, PhoneSettings
 
@@ -48,7 +60,6 @@ log = logging.getLogger(__name__)
 PAGE_DIR = Path(__file__).resolve().parent / "page"
 URL_KEYS = ("tls_dir", "key_file", "http_port")
 WARN_EVERY_S = 5.0
-QUEUE_SIZE = 1000
 STOP_POLL_S = 0.1  # how often the server thread looks at the stop event
 
 
@@ -95,7 +106,7 @@ class _Warnings:
         return text
 
 
-class PhoneSource:
+class PhoneSource(ThreadedSource):
     """One phone (one sensor of a pedestrian agent) as an iterable of ImuBatch and StandScan.
 
     The server starts in the constructor and is listening when it returns (`port`, `http_port`:
@@ -104,38 +115,32 @@ class PhoneSource:
     samples are flushed. One phone per source: two phones' clocks would interleave.
     """
 
-    _DONE = object()
-
     def __init__(self, url: str, session: Session, agent_id: str, sensor_id: str, stop: threading.Event,
                  venue_toml: Path | str | None = None, settings: PhoneSettings | None = None):
         self.host, requested_port, options = parse_phone_url(url)
         folder = Path(venue_toml).parent if venue_toml else Path.cwd()
         self.tls_dir = Path(options.get("tls_dir") or folder / "phone-tls")
-        self.session, self.agent_id, self.sensor_id, self.stop = session, agent_id, sensor_id, stop
+        super().__init__(stop)  # blocks the server, never drops
+        self.session, self.agent_id, self.sensor_id = session, agent_id, sensor_id
         self.venue = session.venue
-        key_path = Path(options.get("key_file") or folder / f"{self.venue.name}.standkey")
+        key_path = stand_key_path(folder, self.venue.name, options.get("key_file"))
         self.key: bytes | None = load_key(key_path) if self.venue.stands or key_path.exists() else None
         self.counters = Counters()
         self.batcher = MotionBatcher(agent_id, sensor_id, settings, self.counters)
         self.aligner = Aligner(self.batcher.settings, self.counters)
         self.rotation_check = RotationUnitCheck(self.batcher.settings.gap_ns)  # the page's rotationRate only
-        self.queue: queue.Queue[Any] = queue.Queue(maxsize=QUEUE_SIZE)  # blocks the server, never drops
         self._warnings = _Warnings(f"phone {agent_id}/{sensor_id}")
-        self._closing = threading.Event()
-        self._started = threading.Event()
-        self._error: BaseException | None = None
-        self.port = 0
-        self.http_port: int | None = None
         cert, key = phone_tls.ensure_certificate(self.tls_dir, self.host)
-        self._ssl = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
-        self._ssl.load_cert_chain(cert, key)
-        self._plain_port = int(options["http_port"]) if "http_port" in options else None
-        self._thread = threading.Thread(target=self._run, args=(requested_port,), name=f"phone-{sensor_id}",
-                                        daemon=True)
-        self._thread.start()
-        self._started.wait()
-        if self._error is not None:
-            raise ConfigError(f"{url!r}: cannot listen ({self._error})") from self._error
+        context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+        context.load_cert_chain(cert, key)
+        sites: list[tuple[str, int, ssl.SSLContext | None]] = [(self.host, requested_port, context)]
+        if "http_port" in options:
+            sites.append((self.host, int(options["http_port"]), None))
+        self.server = BackgroundServer(repr(url), self._app, sites, self._until_stopped, self._flush)
+        self.start(self.server.run, name=f"phone-{sensor_id}")  # an error after start-up reaches the consumer
+        self.server.wait_listening()
+        self.port = self.server.ports[0]
+        self.http_port: int | None = self.server.ports[1] if len(sites) > 1 else None
         log.info("%s", self.addresses())
 
     # -- the consumer's side
@@ -148,19 +153,10 @@ class PhoneSource:
             text += f"; Sensor Logger push to http://{host}:{self.http_port}/sensorlogger"
         return text
 
-    def __iter__(self) -> Iterator[Any]:
-        while True:
-            item = self.queue.get()
-            if item is self._DONE:
-                return
-            if isinstance(item, BaseException):
-                raise item
-            yield item
-
     def close(self) -> None:
         """Stop the server (returns at once); iterating then yields what is queued and the flushed
         samples, and ends. Nothing is dropped."""
-        self._closing.set()
+        self.server.close()
 
     def __enter__(self) -> PhoneSource:
         return self
@@ -168,46 +164,25 @@ class PhoneSource:
     def __exit__(self, *exc: Any) -> None:
         """Stop the server and wait for it; what the consumer did not take is discarded here (the
         consumer is leaving), so that a server blocked on a full queue can end."""
-        self._closing.set()
-        while self._thread.is_alive():
-            try:
-                self.queue.get(timeout=STOP_POLL_S)
-            except queue.Empty:
-                pass
+        self.server.close()
+        self.leave()
+        self.join()
 
     # -- the server thread
 
-    def _run(self, requested_port: int) -> None:
-        try:
-            asyncio.run(self._serve(requested_port))
-        except BaseException as error:  # handed to the consumer (or the constructor), raised there
-            if not self._started.is_set():
-                self._error = error
-                self._started.set()
-                return
-            self.queue.put(error)
-        self.queue.put(self._DONE)
-
-    async def _serve(self, requested_port: int) -> None:
+    def _app(self) -> web.Application:
         self._lock = asyncio.Lock()  # keeps messages in the order they were decoded
         app = web.Application(client_max_size=4 << 20)
         app.add_routes([web.get("/", self._page), web.get("/ca.pem", self._ca), web.get("/ws", self._ws),
                         web.post("/sensorlogger", self._sensor_logger), web.static("/static", PAGE_DIR / "static")])
-        runner = web.AppRunner(app, access_log=None, handle_signals=False)
-        await runner.setup()
-        try:
-            site = web.TCPSite(runner, self.host, requested_port, ssl_context=self._ssl)
-            await site.start()
-            self.port = site._server.sockets[0].getsockname()[1]  # type: ignore[union-attr]
-            if self._plain_port is not None:
-                plain = web.TCPSite(runner, self.host, self._plain_port)
-                await plain.start()
-                self.http_port = plain._server.sockets[0].getsockname()[1]  # type: ignore[union-attr]
-            self._started.set()
-            while not (self.stop.is_set() or self._closing.is_set()):
-                await asyncio.sleep(STOP_POLL_S)
-        finally:
-            await runner.cleanup()
+        return app
+
+    async def _until_stopped(self) -> None:
+        while not (self.stop.is_set() or self.server.closing):
+            await asyncio.sleep(STOP_POLL_S)
+
+    async def _flush(self) -> None:
+        """After the server has closed: the samples still held go out."""
         batches, problems = self.batcher.flush()
         self._warnings.add(problems)
         await self._put(batches)
@@ -218,7 +193,7 @@ class PhoneSource:
                 try:
                     self.queue.put_nowait(item)
                 except queue.Full:  # the consumer is behind: wait for it off the event loop
-                    await asyncio.get_running_loop().run_in_executor(None, self.queue.put, item)
+                    await asyncio.get_running_loop().run_in_executor(None, self.put, item)
 
     def _stamp(self, batches: list[Any], received_ns: int) -> list[Any]:
         for batch in batches:
@@ -235,6 +210,7 @@ class PhoneSource:
         socket = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4 << 20)
         await socket.prepare(request)
         log.info("phone %s/%s: page connected from %s", self.agent_id, self.sensor_id, request.remote)
+        frames = QrFrameReader()  # per page: its camera frames and the code it last passed on
         async for message in socket:
             received_ns = time.time_ns()
             if message.type not in (WSMsgType.TEXT, WSMsgType.BINARY):
@@ -260,12 +236,26 @@ class PhoneSource:
                 self.batcher.gyro_scale = self.rotation_check.scale
             elif kind == "scan":
                 reply = await self._scan(*data)
+            elif kind == "frame":
+                reply = await self._frame(frames, data, problems)
             told = self._warnings.add(problems)
             if told:
                 reply["problem"] = told
             await socket.send_json(reply)
-        log.info("phone %s/%s: page disconnected (%s)", self.agent_id, self.sensor_id, json.dumps(vars(self.counters)))
+        log.info("phone %s/%s: page disconnected (%s; frames %s)", self.agent_id, self.sensor_id,
+                 json.dumps(vars(self.counters)), json.dumps(vars(frames.counts)))
         return socket
+
+    async def _frame(self, frames: QrFrameReader, data: tuple[int, bytes, int, int],
+                     problems: list[str]) -> dict[str, Any]:
+        """A camera frame: its code, if new, is scanned as a page's `scan` message is. The reply
+        says what the frame gave (`frame`), which the page waits for before sending the next one.
+        zxing-cpp takes a few ms on the page's frames: run inline, as the rest of the message."""
+        time_ns, jpeg, width, height = data
+        outcome, text = frames.feed(time_ns, jpeg, width, height, problems)
+        if text is None:
+            return {"type": "frame_result", "frame": outcome.value, "samples": self.counters.samples_out}
+        return {**await self._scan(time_ns, text), "frame": outcome.value}
 
     async def _scan(self, time_ns: int, text: str) -> dict[str, Any]:
         self.counters.scans += 1
@@ -301,25 +291,54 @@ class PhoneSource:
                                   "problems": len(problems) + len(more)})
 
 
-def open_phone_source(urls: list[str], agent_id: str, stop: threading.Event,
-                      venue_toml: Path | None) -> tuple[Session, PhoneSource]:
-    """(session, source) for the edge's `--source SENSOR=phone://HOST:PORT[?...]` (one per edge,
-    alone: a phone's samples carry its own clock). ConfigError naming the --source otherwise."""
-    from reckon.processes.edge import _check_agent, session_description
+def open_phone(request: OpenRequest) -> tuple[Session, Iterable[Any]]:
+    """`SENSOR=phone://HOST:PORT[?...]`: one per edge, alone (a phone's samples carry its own clock)."""
+    if len(request.specs) != 1:
+        raise ConfigError(f"--source {request.specs[1].given!r}: a phone source goes alone, one per edge (its "
+                          "samples carry the phone's clock)")
+    spec = request.specs[0]
+    session, _ = live_session(request, "a phone source", "it names the agent's sensor, the stands and where their "
+                              "key is")
+    return session, PhoneSource(spec.url, session, request.agent_id, spec.sensor_id, request.stop, request.venue_toml)
 
-    phones = [url for url in urls if urlsplit(url.partition("=")[2]).scheme == "phone"]
-    if len(urls) != 1:
-        other = next((url for url in urls if url not in phones), phones[-1])
-        raise ConfigError(f"--source {other!r}: a phone source goes alone, one per edge (its samples carry the "
-                          "phone's clock)")
-    sensor_id, _, url = urls[0].partition("=")
-    if venue_toml is None:
-        raise ConfigError("--venue VENUE.toml is needed with a phone source (it names the agent's sensor, the "
-                          "stands and where their key is)")
-    session = session_description(venue_toml)
-    agent = _check_agent(session, agent_id, str(venue_toml))
-    known = {s.id for s in agent.sensors}
-    if sensor_id not in known:
-        raise ConfigError(f"--source {urls[0]!r}: {agent_id} has no sensor {sensor_id!r} "
-                          f"(sensors: {', '.join(sorted(known)) or 'none'})")
-    return session, PhoneSource(url, session, agent_id, sensor_id, stop, venue_toml)
+
+def check_phone(request: CheckRequest) -> list[Finding]:
+    """The port is free, the TLS certificate is there and valid, and the stand key if the venue has stands."""
+    host, port, options = parse_phone_url(request.url)
+    try:
+        with socket.create_server((host, port)):
+            pass
+    except OSError as error:
+        why = {errno.EADDRINUSE: f"port {port} is in use (another edge or server?)",
+               errno.EACCES: f"no permission to listen on port {port} (below 1024)",
+               errno.EADDRNOTAVAIL: f"{host} is not an address of this machine"}.get(error.errno, str(error))
+        return [Finding(Level.FAIL, why, "choose another HOST:PORT, or stop what uses it")]
+    folder = request.venue.parent if request.venue else Path.cwd()
+    tls_dir = Path(options.get("tls_dir") or folder / "phone-tls")
+    cert = tls_dir / "cert.pem"
+    findings: list[Finding] = []
+    if not cert.exists():
+        findings.append(Finding(Level.WARN, f"port {port} free; no certificate yet in {tls_dir}",
+                                "the edge makes one at its first start; each phone then trusts /ca.pem once "
+                                "(docs/phone.md)"))
+    else:
+        days = _days_left(cert)
+        level = Level.OK if days > 30 else Level.WARN
+        findings.append(Finding(level, f"port {port} free; certificate {cert} valid {days:.0f} more days",
+                                "" if level is Level.OK else "the edge issues a new one at its next start"))
+    session = request.session
+    key_file = stand_key_path(folder, session.venue.name, options.get("key_file")) if session else None
+    if session is not None and session.venue.stands and key_file is not None and not key_file.exists():
+        findings.append(Finding(Level.FAIL, f"the venue has QR stands but no stand key at {key_file}",
+                                "`reckon qr make VENUE.toml -o DIR` creates it, or give ?key_file="))
+    return findings
+
+
+def _days_left(cert: Path) -> float:
+    from cryptography import x509
+
+    ends = x509.load_pem_x509_certificate(cert.read_bytes()).not_valid_after_utc
+    return (ends - datetime.datetime.now(datetime.UTC)).total_seconds() / 86400.0
+
+
+SCHEME = Scheme("phone", "SENSOR=phone://HOST:PORT", open_phone, check_phone)

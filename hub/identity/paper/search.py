@@ -6,7 +6,7 @@ vertical acceleration predicted from the fragment's speed and the one the sensor
 the frames they share, L_i seconds. Fragments with Mae_i >= Ave + SD / sqrt(L_i) are pruned for
 that person (eq. 1); the rest score e_i = 1 - Mae_i / max Mae (eq. 2) and eval_i = e_i * L_i
 (eq. 3). A person's route is the chain of fragments with the largest total, lost stretches
-bridged by virtual fragments (`track_paper_chain`). People
+bridged by virtual fragments (`best_chain`, hub/identity/paper/chain.py). People
 are assigned one at a time, each removing the fragments it used; every order (permutation) is
 tried and the largest sum over people wins. That is n! orders: `max_permutations` and
 `max_transitions` stop the search and say so. See docs/identity.md for every reading taken.

@@ -144,3 +144,14 @@ def write_scene(path, paths: dict[str, tuple[np.ndarray, np.ndarray]], tracks: l
     with SessionWriter(path, scene) as writer:
         for log_ns, topic, message in items:
             writer.write(topic, message, log_ns)
+
+
+# The crossing scene: three people on waypoint paths for 30 s in the room; a and b cross at about 6 s.
+CROSSING = {
+    "a": waypoints_path([(0, 0.5, 1.0), (2, 0.5, 1.0), (8, 5.0, 2.0), (11, 5.0, 2.0), (16, 1.0, 0.6), (20, 1.0, 0.6),
+                         (26, 4.5, 2.5), (30, 4.5, 2.5)]),
+    "b": waypoints_path([(0, 5.0, 1.0), (3, 5.0, 1.0), (9, 0.6, 2.0), (12, 2.5, 2.5), (15, 2.5, 2.5), (21, 5.0, 0.5),
+                         (30, 5.0, 0.5)]),
+    "c": waypoints_path([(0, 2.8, 0.4), (5, 2.8, 0.4), (7, 2.0, 1.5), (13, 2.0, 1.5), (18, 4.0, 1.0), (24, 1.5, 2.5),
+                         (30, 1.5, 2.5)]),
+}
