@@ -23,12 +23,20 @@ def run_bench_command(args: argparse.Namespace, progress: Callable[[str], None])
                           progress=progress)
         print(json.dumps(result, indent=1) if args.json else format_soak(result))
         return 0
+    from reckon.bench.compare import compare, format_comparison, load_baseline
     from reckon.bench.pipeline import format_table, run_bench
 
+    baseline = load_baseline(args.compare) if args.compare else None  # a bad file fails before the minute of bench
     result = run_bench(Path(args.out), players=args.players or 10, duration_s=args.duration, seed=args.seed,
                        progress=progress, latency_players=args.latency_players)
-    print(json.dumps(result, indent=1) if args.json else format_table(result))
-    return 0
+    rows = compare(result, baseline) if baseline is not None else []
+    if args.json:
+        print(json.dumps({**result, "comparison": rows} if baseline is not None else result, indent=1))
+    else:
+        print(format_table(result))
+        if baseline is not None:
+            print(format_comparison(rows, args.compare))
+    return 1 if any(row["worse"] for row in rows) else 0
 
 
 def register(sub: Any) -> None:
@@ -46,4 +54,6 @@ def register(sub: Any) -> None:
     bench.add_argument("--latency-players", type=int, metavar="N", help="chairs in the paced latency run (default: --players)")
     bench.add_argument("--out", default="out/bench", help="folder for the games, the hub's recordings and the process logs")
     bench.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    bench.add_argument("--compare", metavar="BASE.json", help="pipeline: every figure beside a saved `--json` run's, "
+                       "as a ratio; exit status 1 if any is more than 25 %% worse")
     bench.set_defaults(run=run_bench_command)
