@@ -28,11 +28,12 @@ LATENCY_SPEED = 1.0  # its pace, times real time
 WARMUP_S = 2.0  # each agent's first poses of the paced run, left out of the percentiles (first numba call)
 
 
-def latency_run(game: Path, folder: Path, speed: float) -> dict[str, Any]:
+def latency_run(game: Path, folder: Path, speed: float, startup_cpu_s: float = 0.0) -> dict[str, Any]:
+    """`startup_cpu_s`: what one edge process spends starting (play's start allowance)."""
     session = read_description(game)
     venue = session.venue.name
     selectors = tuple(keys.all_agents(venue, stream) for stream in ("imu/*", "pose/edge", "pose/live"))
-    run = play(game, folder, speed, selectors)
+    run = play(game, folder, speed, selectors, startup_cpu_s)
     result = latencies(run.received, session)
     hub_inputs = sum(hub_timeline(run.recording)["inputs"].values())
     hub_cpu = run.hub.cpu_s - run.cpu_at_start["hub"]
@@ -44,7 +45,8 @@ def latency_run(game: Path, folder: Path, speed: float) -> dict[str, Any]:
                   cpu_s={"hub": hub_cpu,
                          "edges_total": sum(e.cpu_s - run.cpu_at_start[a] for a, e in run.edges.items()),
                          "bench_process": run.own_cpu_s, "machine_busy": run.system_busy_s},
-                  hub_summary=run.hub_summary)
+                  hub_summary=run.hub_summary, late_starts_s=run.late_starts,
+                  start_allowance_s=run.start_allowance_s)
     return result
 
 

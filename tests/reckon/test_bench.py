@@ -14,6 +14,8 @@ from protocol import bus as wire
 from protocol import keys, messages
 from protocol.session import Mount
 from protocol.session_log import read_description
+from protocol.errors import ReckonError
+from reckon.bench import play as play_module
 from reckon.bench.latency import latencies
 from reckon.bench.pipeline import run_bench
 from reckon.bench.report import format_table
@@ -52,6 +54,23 @@ def test_details_account_for_every_pose(bench):
     assert pipeline["hub_inputs"]["pose/edge"] == pipeline["hub_outputs"]["pose/live"]
     assert details["edge"]["kernel_samples"] >= 1_000_000
     assert "pipeline" in format_table(result)
+    for run in (pipeline, latency):  # every kept run started in step: a late attempt was done again
+        assert run["start_allowance_s"] >= 1.0 and all(late > 0 for late in run["late_starts_s"])
+
+
+def test_edges_never_up_by_their_start_are_given_up_naming_how_late(bench, monkeypatch):
+    out, _, _ = bench
+    allowances: list[float] = []
+
+    def too_short(edges: int, startup_cpu_s: float, cores: int) -> float:
+        allowances.append(0.001 * 2 ** len(allowances))
+        return allowances[-1]
+
+    monkeypatch.setattr(play_module, "start_allowance_s", too_short)
+    with pytest.raises(ReckonError, match=r"not up by their common start in 3 attempts \(late by [0-9.]+, [0-9.]+, "
+                                          r"[0-9.]+ s"):
+        play_module.play(out / "latency-game.mcap", out / "late", 1.0)
+    assert len(allowances) == 1  # each attempt doubles the one before, not asks again
 
 
 def _received(key: str, message, received_ns: int, source_ns: int) -> Received:
