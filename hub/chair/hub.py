@@ -60,6 +60,7 @@ FIX_GATE_CHI2 = 13.8  # 99.9 %, 2 dof
 ACROSS_VARIANCE_M2 = 1e4  # a contact says nothing about the direction across the line between chairs
 HISTORY = 1024  # poses kept per agent for looking back to a measured time (20 s at 50 Hz)
 GAP_S = 0.2  # poses further apart than this are a gap (the edge publishes at 50 Hz)
+_EYE2 = np.eye(2)  # read only
 STALE_MPS = 2.0  # a chair's typical speed (a 10-chair game: 150-200 m in 120 s): how a pose's doubt grows with its age
 
 
@@ -223,9 +224,14 @@ class ChairHub:
         # checkpoint): number on from them, so the edge does not drop ours as repeats.
         view.sequence = max(view.sequence, pose.correction_sequence)
         view.acknowledged = pose.correction_sequence
-        view.pending = [(seq, shift) for seq, shift in view.pending if seq > pose.correction_sequence]
-        xy = np.array([pose.x_m, pose.y_m]) + sum((shift for _, shift in view.pending), np.zeros(2))
-        covariance = np.array(pose.covariance, dtype=float).reshape(3, 3) if len(pose.covariance) == 9 else np.eye(3)
+        if view.pending:
+            view.pending = [(seq, shift) for seq, shift in view.pending if seq > pose.correction_sequence]
+        if view.pending:
+            xy = np.array([pose.x_m, pose.y_m]) + sum((shift for _, shift in view.pending), np.zeros(2))
+        else:  # the usual case; + 0.0 as the sum above adds (it turns -0.0 into 0.0)
+            xy = np.array([pose.x_m + 0.0, pose.y_m + 0.0])
+        # A slice of the repeated field converts to an array twice as fast as the field itself.
+        covariance = np.array(pose.covariance[:], dtype=float).reshape(3, 3) if len(pose.covariance) == 9 else np.eye(3)
         view.covariance = covariance
         self._grow_extra(view, time_ns, pose)
         view.latest_ns = time_ns if view.latest_ns is None else max(view.latest_ns, time_ns)
@@ -249,7 +255,7 @@ class ChairHub:
         travel = math.hypot(pose.x_m - last[1], pose.y_m - last[2]) if pose.correction_sequence == last[3] else 0.0
         grow = self.settings.extra_m2_per_m * travel + self.settings.extra_m2_per_s * (time_ns - last[0]) * 1e-9
         if grow > 0 and view.extra[0, 0] + view.extra[1, 1] < 2 * self.settings.extra_max_m2:
-            view.extra = view.extra + grow * np.eye(2)
+            view.extra = view.extra + grow * _EYE2
 
     def on_impact(self, event: Any) -> None:
         if event.peak_g < self.settings.impact_g or "collision" not in self.settings.corrections:
@@ -315,9 +321,10 @@ class ChairHub:
         """
         if view.latest_ns is None:
             return []
-        for beacon_id, current in list(view.passes.items()):
-            if view.latest_ns - current.last_ns > self.settings.pass_end_s * 1e9:
-                view.ended.append((beacon_id, view.passes.pop(beacon_id)))
+        if view.passes:
+            for beacon_id, current in list(view.passes.items()):
+                if view.latest_ns - current.last_ns > self.settings.pass_end_s * 1e9:
+                    view.ended.append((beacon_id, view.passes.pop(beacon_id)))
         out = []
         while view.ended and view.ended[0][1].peak_ns <= view.latest_ns:
             beacon_id, ended = view.ended.popleft()
