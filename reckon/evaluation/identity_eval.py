@@ -210,7 +210,8 @@ def _ceiling(data: SessionData, agents: list[str], latency_s: float) -> Identity
         for f, frame_ns in enumerate(tracks.frame_ns):
             shown = {(int(tracks.track_id[r]), a) for r in range(starts[f], ends[f])
                      for a in str(tracks.person_id[r]).split("+") if a}
-            since = {pair: since.get(pair, int(frame_ns)) for pair in shown}
+            # sorted: a person shown by two tracks goes to the lower track id, whatever the string hash seed
+            since = {pair: since.get(pair, int(frame_ns)) for pair in sorted(shown)}
             for (track, a), first_ns in since.items():
                 if a in held and frame_ns - first_ns >= latency_s * 1e9 and held[a][f] == 0:
                     held[a][f] = track
