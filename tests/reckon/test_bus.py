@@ -11,6 +11,7 @@ import queue
 import subprocess
 import sys
 import threading
+import time
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -365,9 +366,24 @@ def test_callback_subscription_answer_query_and_token_watch():
                 TokenWatch(edge, wire.alive_selector(VENUE, wire.Role.HUB), lambda k, up: tokens.put((k, up))):
             assert tokens.get(timeout=WAIT_S) == (alive.key, True)  # already present: reported from history
             with Publisher(edge) as publisher:
+                # The hub's token reaching the edge does not mean its subscription has: until it
+                # has, a put finds no subscriber and goes nowhere. Probes until one comes through.
+                deadline = time.monotonic() + WAIT_S
+                while True:
+                    publisher.publish(key, messages.new("Correction", **{**SAMPLES["Correction"], "timestamp_ns": -1}))
+                    try:
+                        got.get(timeout=0.05)
+                        break
+                    except queue.Empty:
+                        assert time.monotonic() < deadline, "the hub's subscription never reached the edge"
                 for n in range(3):
                     publisher.publish(key, messages.new("Correction", **{**SAMPLES["Correction"], "timestamp_ns": n}))
-            assert [got.get(timeout=WAIT_S).decode().timestamp_ns for _ in range(3)] == [0, 1, 2]
+            stamps: list[int] = []
+            while len(stamps) < 3:
+                stamp = got.get(timeout=WAIT_S).decode().timestamp_ns
+                if stamp != -1:  # a probe still on its way
+                    stamps.append(stamp)
+            assert stamps == [0, 1, 2]
             replies = list(query(edge, answer_key, WAIT_S))
             assert [(r.key, r.payload, r.encoding) for r in replies] == [(answer_key, b"description", wire.SESSION_ENCODING)]
             alive.close()
