@@ -54,7 +54,11 @@ class Play:
 
 
 class _Late(Exception):
-    """The edges were up only after their common start."""
+    """The edges were up only after their common start, by `late_s`."""
+
+    def __init__(self, late_s: float):
+        super().__init__(f"the edges were up {late_s:.3f} s after their common start")
+        self.late_s = late_s
 
 
 def start_allowance_s(edges: int, startup_cpu_s: float, cores: int) -> float:
@@ -80,7 +84,7 @@ def play(game: Path, folder: Path, speed: float, selectors: tuple[str, ...] = ()
         try:
             run = _play_once(game, session, folder, speed, selectors, allowance_s)
         except _Late as error:
-            late.append(float(str(error)))
+            late.append(error.late_s)
             allowance_s *= 2
             continue
         run.late_starts = late
@@ -117,7 +121,7 @@ def _play_once(game: Path, session: Any, folder: Path, speed: float, selectors: 
                 wait_for_peers(bus, wire.alive_selector(venue, wire.Role.EDGE), len(edges), 60.0)
                 edges_up_ns = time.time_ns()
                 if edges_up_ns > start_at * 1e9:
-                    raise _Late(f"{edges_up_ns * 1e-9 - start_at:.3f}")
+                    raise _Late(edges_up_ns * 1e-9 - start_at)
                 time.sleep(max(0.0, start_at - 0.05 - time.time()))  # everyone is idle, waiting for start_at
                 cpu_at_start = {name: child.cpu_s() for name, child in [("hub", hub), *edges.items()]}
                 busy_at_start, own_at_start = system_busy_s(), time.process_time()

@@ -53,42 +53,40 @@ def run_sim_pedestrian(args: argparse.Namespace, progress: Callable[[str], None]
     return 0
 
 
+def _seed_output_set(parser: argparse.ArgumentParser, doc: str) -> None:
+    """What every simulator takes: its seed, the session log to write, and figure overrides."""
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("-o", "--output", required=True)
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help=f"override a simulator figure ({doc})")
+
+
 def register(sub: Any) -> None:
     sim = sub.add_parser("sim", help="simulate a venue into a session log (MCAP)")
     sim_kind = sim.add_subparsers(dest="kind", required=True)
     chairs = sim_kind.add_parser("wheelchair", help="a wheelchair-basketball game on a 28 x 15 m court")
     chairs.add_argument("--players", type=int, default=10)
     chairs.add_argument("--duration", type=float, default=317.0, help="seconds (the paper's game: 317)")
-    chairs.add_argument("--seed", type=int, default=1)
-    chairs.add_argument("-o", "--output", required=True)
-    chairs.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override a simulator parameter (docs/simulator.md)")
+    _seed_output_set(chairs, "docs/simulator.md")
     chairs.add_argument("--camera", action="store_true",
                         help="add a simulated court tracker's anonymous tracks and their truth labels, two referees "
                              "included (docs/simulator-camera.md)")
     chairs.set_defaults(run=run_sim)
     swim = sim_kind.add_parser("swim", help="swimmers and kickboards in a 25 x 18 m pool, straight and diagonal "
                                             "lengths (docs/simulator-swim.md)")
-    swim.add_argument("--seed", type=int, default=1)
     swim.add_argument("--swimmers", type=int, default=4, help="crawl swimmers and kickboards per route (the paper: 4)")
     swim.add_argument("--lengths", type=int, default=4, help="lengths per set")
-    swim.add_argument("-o", "--output", required=True)
-    swim.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                      help="override a simulator figure (docs/simulator-swim.md)")
+    _seed_output_set(swim, "docs/simulator-swim.md")
     swim.set_defaults(run=run_sim_swim)
     room = sim_kind.add_parser("room", help="the camera-identity paper's room: people walking with a waist sensor, "
                                             "seen by a stereo head tracker (docs/simulator-room.md)")
-    room.add_argument("--seed", type=int, default=1)
     room.add_argument("--people", type=int, default=3, help="wearers (the paper: 3); the room grows with them")
     room.add_argument("--duration", type=float, default=297.0, help="seconds (the paper's recording: 297)")
     room.add_argument("--no-camera", action="store_true", help="leave the tracker's frames out")
-    room.add_argument("-o", "--output", required=True)
-    room.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                      help="override a simulator figure (docs/simulator-room.md)")
+    _seed_output_set(room, "docs/simulator-room.md")
     room.set_defaults(run=run_sim_room)
     walk = sim_kind.add_parser("pedestrian", help="people walking a building with a phone in the hand or a pocket, "
                                                   "calibration stands with QR codes (docs/simulator-pedestrian.md)")
-    walk.add_argument("--seed", type=int, default=1)
     walk.add_argument("--people", type=int, default=3, help="walkers (the paper: 3, statures 169/174/179 cm)")
     walk.add_argument("--preset", choices=["paper", "floorplan"], default="paper",
                       help="paper: the paper's 12-point corridor map and route; floorplan: an office floor with "
@@ -96,7 +94,5 @@ def register(sub: Any) -> None:
     walk.add_argument("--mount", choices=["hand", "pocket", "both"], default="hand",
                       help="where each walker carries a phone (both: two phones)")
     walk.add_argument("--duration", type=float, default=None, help="seconds per walker (default: the whole route)")
-    walk.add_argument("-o", "--output", required=True)
-    walk.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                      help="override a simulator figure (docs/simulator-pedestrian.md)")
+    _seed_output_set(walk, "docs/simulator-pedestrian.md")
     walk.set_defaults(run=run_sim_pedestrian)
