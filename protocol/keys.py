@@ -29,6 +29,11 @@ def beacon(venue: str, agent: str, sensor: str) -> str:
     return f"{ROOT}/{venue}/{agent}/beacon/{sensor}"
 
 
+def pressure(venue: str, agent: str, sensor: str) -> str:
+    """A barometer's readings (Pressure), e.g. a phone's."""
+    return f"{ROOT}/{venue}/{agent}/pressure/{sensor}"
+
+
 def truth(venue: str, agent: str) -> str:
     return f"{ROOT}/{venue}/{agent}/truth/pose"
 

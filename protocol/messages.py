@@ -112,6 +112,9 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("method", "string", False),
         ("track", "Track", False),
         ("correction_sequence", "uint32", False),  # the last Correction of this agent taken into account
+        # A pedestrian's pose/live and pose/refined: the floor plan contradicted the dead-reckoned
+        # track, and this pose is the edge's own track shifted by the last agreed offset (hub/pedestrian/guard.py).
+        ("map_fallback", "bool", False),
     ],
     "ImpactEvent": [
         ("schema_version", "uint32", False),
@@ -276,6 +279,15 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("kind", "ContactKind", False),
         ("closing_speed_mps", "float", False),
     ],
+    # One barometer reading (device clock), e.g. a phone's: a floor is about 3 m, 0.36 hPa. Double,
+    # not float: recorders write 0.01 Pa (4 decimals of hPa), which a float32 near 1013 hPa rounds.
+    "Pressure": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("sensor_id", "string", False),
+        ("pressure_hpa", "double", False),
+    ],
 }
 
 
@@ -318,6 +330,7 @@ TruthTrackLabel = CLASSES["TruthTrackLabel"]
 TrackIdentity = CLASSES["TrackIdentity"]
 StandScan = CLASSES["StandScan"]
 DeviceStatus = CLASSES["DeviceStatus"]
+Pressure = CLASSES["Pressure"]
 
 
 def new(name: str, **fields: Any) -> Any:

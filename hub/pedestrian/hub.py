@@ -19,6 +19,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from hub.pedestrian.guard import GuardSettings, MapGuard
 from hub.pedestrian.matching import DeadReckonedPose, MapMatcher
 from hub.pedestrian.particles import ParticleMatcher, ParticleSettings
 from hub.pedestrian.walkable import WalkableArea
@@ -43,6 +44,8 @@ SNAPS_KEPT = 1024  # a 4-minute walk over the paper's map makes about 20 snap de
 PHONE_PARTICLES = ParticleSettings(
     reset_heading_sd_rad=math.radians(4.0), offset_walk_rad_per_sqrt_s=math.radians(0.15), turn_scale_sd=0.01,
     offset_reversion_s=10.0, initial_scale_sd=0.05, smoothing_lag_steps=REFINED_LAG_STEPS)
+# The check that falls back to the edge's own track where the map contradicts it (hub/pedestrian/guard.py).
+PHONE_GUARD = GuardSettings()
 
 
 @dataclass
@@ -54,26 +57,30 @@ class PedestrianView:
     poses: int = 0
     out_of_order: int = 0
     matched: int = 0  # poses that went through the matcher
+    fallback_poses: int = 0  # live poses that are the edge's own track: the map contradicted it
     snaps: deque = field(default_factory=lambda: deque(maxlen=SNAPS_KEPT))  # the paper's snap decisions, newest
     last: tuple[float, float] | None = None  # the last pose out (x m, y m)
 
     def describe(self) -> str:
         where = "none" if self.last is None else f"x {self.last[0]:.2f} m, y {self.last[1]:.2f} m"
-        return (f"{self.poses} poses, {self.resets} stand resets, {self.out_of_order} out of order; "
+        fallback = f", {self.fallback_poses} on the edge's track (map contradicted)" if self.fallback_poses else ""
+        return (f"{self.poses} poses, {self.resets} stand resets, {self.out_of_order} out of order{fallback}; "
                 f"last {where}")
 
 
-def particle_matcher_factory(venue: Venue) -> Callable[[str], MapMatcher] | None:
-    """Our matcher for each pedestrian, or None when the venue has no map. The walkable area is
-    built once and shared; each agent's filter has its own seed (agent order)."""
+def particle_matcher_factory(venue: Venue, area: WalkableArea | None = None) -> Callable[[str], MapMatcher] | None:
+    """Our matcher for each pedestrian, or None when the venue has no map: the particle filter
+    behind the map guard. The walkable area (`area`, else built from the venue) is shared; each
+    agent's filter has its own seed (agent order)."""
     if not venue.floor_plan and not venue.map_points:
         return None
-    area = WalkableArea.from_venue(venue)
+    if area is None:
+        area = WalkableArea.from_venue(venue)
     seeds: dict[str, int] = {}
 
     def make(agent_id: str) -> MapMatcher:
         seed = seeds.setdefault(agent_id, len(seeds))
-        return ParticleMatcher(area, replace(PHONE_PARTICLES, seed=seed))
+        return MapGuard(ParticleMatcher(area, replace(PHONE_PARTICLES, seed=seed)), PHONE_GUARD)
 
     return make
 
@@ -115,15 +122,18 @@ class PedestrianHub:
             out = self._refined(view, previous_sequence)
             here = (message.timestamp_ns, message.x_m, message.y_m, message.heading_rad, covariance, sequence)
             refined_too = view.matcher.refined_lag_steps > 0
-            return out + [self._pose(view, *here)] + (
-                [self._pose(view, *here, track=messages.Track.REFINED)] if refined_too else [])
+            off_map = bool(getattr(view.matcher, "fallback", False))  # a stand the map does not allow
+            return out + [self._pose(view, *here, fallback=off_map)] + (
+                [self._pose(view, *here, track=messages.Track.REFINED, fallback=off_map)] if refined_too else [])
         matched = view.matcher.update(DeadReckonedPose(message.timestamp_ns, message.x_m, message.y_m,
                                                        message.heading_rad, covariance))
         view.matched += 1
         if matched.snap is not None:
             view.snaps.append(matched.snap)
+        if matched.fallback:
+            view.fallback_poses += 1
         return [self._pose(view, matched.time_ns, matched.x_m, matched.y_m, matched.heading_rad, matched.covariance,
-                           sequence)] + self._refined(view, sequence)
+                           sequence, fallback=matched.fallback)] + self._refined(view, sequence)
 
     def flush(self) -> list[Any]:
         """End of the streams: every refined pose still waiting for its lag."""
@@ -131,21 +141,23 @@ class PedestrianHub:
         for view in self.agents.values():
             if view.matcher is not None:
                 out += [self._pose(view, p.time_ns, p.x_m, p.y_m, p.heading_rad, p.covariance, view.resets,
-                                   track=messages.Track.REFINED) for p in view.matcher.flush()]
+                                   track=messages.Track.REFINED, fallback=p.fallback) for p in view.matcher.flush()]
         return out
 
     def _refined(self, view: PedestrianView, sequence: int) -> list[Any]:
         return [self._pose(view, p.time_ns, p.x_m, p.y_m, p.heading_rad, p.covariance, sequence,
-                           track=messages.Track.REFINED) for p in view.matcher.refined()] if view.matcher else []
+                           track=messages.Track.REFINED, fallback=p.fallback)
+                for p in view.matcher.refined()] if view.matcher else []
 
     def _pose(self, view: PedestrianView, time_ns: int, x_m: float, y_m: float, heading_rad: float,
-              covariance: np.ndarray | None, sequence: int, track: messages.Track = messages.Track.LIVE) -> Any:
+              covariance: np.ndarray | None, sequence: int, track: messages.Track = messages.Track.LIVE,
+              fallback: bool = False) -> Any:
         if track is messages.Track.LIVE:
             view.last = (x_m, y_m)
         values = [] if covariance is None else np.asarray(covariance, dtype=float).ravel().tolist()
         return messages.new("EstimatedPose", timestamp_ns=time_ns, agent_id=view.agent_id, x_m=x_m, y_m=y_m,
                             heading_rad=math.remainder(heading_rad, 2.0 * math.pi), covariance=values,
-                            method=self.method, track=track, correction_sequence=sequence)
+                            method=self.method, track=track, correction_sequence=sequence, map_fallback=fallback)
 
     def key_for(self, message: Any) -> str:
         track = "refined" if message.track == messages.Track.REFINED else "live"

@@ -61,7 +61,8 @@ class SnapRecord:
 @dataclass(frozen=True)
 class MatchedPose:
     """A matcher's output for one input pose; `snap` is set when the paper's matcher decided a
-    snap at this pose (the particle filter never sets it)."""
+    snap at this pose (the particle filter never sets it); `fallback` when the map contradicted
+    the dead reckoning and this pose is the dead reckoning's own track (hub/pedestrian/guard.py)."""
 
     time_ns: int
     x_m: float
@@ -69,6 +70,7 @@ class MatchedPose:
     heading_rad: float
     covariance: np.ndarray
     snap: SnapRecord | None = None
+    fallback: bool = False
 
 
 class MapMatcher(Protocol):

@@ -78,6 +78,7 @@ class ParticleDiagnostics:
     unreachable_outputs: int = 0  # ... and no particle was reachable from the last output either
     out_of_order: int = 0  # poses not later than the previous one: ignored
     gaps: int = 0
+    reseeds_near: int = 0  # clouds drawn near a given point by `seed_near` (the map guard's re-acquisition)
     effective_particles: float = 0.0
 
 
@@ -196,6 +197,37 @@ class ParticleMatcher:
                    start_y_m + length_m * mean_scale * math.sin(moved_rad),
                    self.settings.recovery_position_sd_m, self.output_offset_rad,
                    self.settings.recovery_heading_sd_rad)
+
+    def seed_near(self, x_m: float, y_m: float, position_sd_m: float, max_distance_m: float) -> bool:
+        """Re-draw the cloud on walkable cells around (x, y), none further than `max_distance_m`:
+        never away from the point (a fix or a track the map does not allow stays where it is). The
+        offsets restart at the dead reckoning's own heading and the scales at their first spread
+        (the point is the dead reckoning's own track: what was learned against the map is not), the
+        output starts at (x, y). False, and nothing changed, when no walkable cell was drawn."""
+        count = self.settings.particles
+        candidates_x = x_m + self.random.normal(0.0, position_sd_m, count)
+        candidates_y = y_m + self.random.normal(0.0, position_sd_m, count)
+        near = np.hypot(candidates_x - x_m, candidates_y - y_m) <= max_distance_m
+        walkable = np.flatnonzero(near & self.area.is_walkable(candidates_x, candidates_y))
+        if walkable.size == 0:
+            return False
+        if self.lag is not None:  # the ancestry ends here
+            self.finished += self.lag.flush(self.weight)
+        chosen = walkable[self.random.integers(walkable.size, size=count)]
+        self.x_m, self.y_m = candidates_x[chosen], candidates_y[chosen]
+        self.offset_rad = self.random.normal(0.0, self.settings.recovery_heading_sd_rad, count)
+        self.scale[:] = self._initial_scales()
+        self.weight = np.full(count, 1.0 / count)
+        self.diagnostics.effective_particles = float(count)
+        self.diagnostics.reseeds_near += 1
+        self.output_xy_m, self.output_offset_rad = (x_m, y_m), 0.0
+        return True
+
+    def restart_at(self, time_ns: int, x_m: float, y_m: float, heading_rad: float) -> None:
+        """The dead reckoning restarted from this pose, without a cloud drawn for it (the caller
+        draws one with `seed_near`, or the cloud it has goes on): the next pose continues from it."""
+        self.previous = DeadReckonedPose(time_ns, x_m, y_m, heading_rad)
+        self.output_xy_m, self.output_offset_rad = (x_m, y_m), 0.0
 
     def _seed(self, x_m: float, y_m: float, position_sd_m: float, offset_rad: float, offset_sd_rad: float) -> None:
         """Particles on walkable cells drawn around (x, y); the spread doubles per attempt while no

@@ -1,18 +1,37 @@
 """Where a pedestrian can walk: the venue's floor plan, or corridors drawn between its map points.
 
+This is the one definition of walkable: the hub's particle filter, `reckon eval`'s check of the
+truth positions, the ILC importer's report and the simulator's route check all go through it
+(`WalkableArea.from_venue`, `WalkableArea.from_floor_plan`, `floor_plan_geometry`).
+
 Two sources (protocol/session.py `Venue`):
-- `floor_plan`: polygons in metres, each [outer ring, hole, ...]; their union is walkable.
+- `floor_plan`: polygons in metres, each [outer ring, hole, ...]. Walkable is the union of the
+  outer rings less the union of every hole (set semantics, each ring repaired on its own). Not
+  shapely's `make_valid` of the whole polygon: that reads the rings by parity, so a shop whose edge
+  lies along the outline (ILC site 1: 11-39 shops per floor cross it) vanishes, or is read inside
+  out: 5,300-9,400 m^2 of shops per floor came out walkable (F2's east wing: a 6,200 m^2 store
+  sharing 150 m of edge with its outline, walkable entire), and a floor whose rings pair up the
+  other way loses its corridors.
+  Then the plan tolerance (`plan_tolerance_m`, 0.5 m): a drawn line is not a wall to the
+  centimetre. Storefronts are open and drawn about half a metre either way, and a surveyor
+  stands in a shop's doorway (site 1: truth waypoints 0.03 and 0.16 m inside shop polygons), so
+  every obstacle wider than twice the tolerance gives up a strip of that width; thinner ones
+  (walls, pillars, kiosks under 1 m) are kept whole, so no partition disappears. Gaps narrower
+  than `plan_gap_m` between two obstacles (shops drawn a few cm apart) are closed first, so the
+  strip does not open a passage through a block of shops.
 - `map_points` only (the indoor-navigation paper's map, its tables 4-5): a corridor leaves point P
   in each of its directions and ends at the nearest point Q lying along that direction (within
   `lateral_tolerance_m` of the ray); the corridor is the segment PQ widened to
-  `corridor_half_width_m` each side, with square ends so that junctions are filled.
+  `corridor_half_width_m` each side, with square ends so that junctions are filled. The width is
+  the model; no tolerance is added.
 
 Queries for many particles at once go through an occupancy grid (`cell_m`). A cell is walkable
 only when its centre lies deeper than `clearance_m` inside the area, with clearance = half the
 cell diagonal + half the sample spacing along a move: then every point where a move crosses a wall
 is within reach of a sampled cell that is marked blocked, so no wall, however thin, is jumped.
 The price is that the strip of about 1.2 cells (0.12 m at 0.1 m cells) along every wall counts
-as wall; people keep more than that from walls anyway. Measured on the ILC plan:
+as wall; on a floor plan the tolerance is wider than that strip, so every point of the plan's
+own walkable area is walkable on the grid (a thin wall's 0.12 m excepted). Measured on the ILC plan:
 this grid check costs 0.12 ms for 500 moves of 0.7 m against 2.2 ms for shapely's vectorised
 `covered_by` on the same moves, and its cost does not grow with the number of holes.
 """
@@ -29,12 +48,22 @@ from shapely.geometry.base import BaseGeometry
 from protocol.session import MapPoint, Venue
 
 
+PLAN_TOLERANCE_M = 0.5  # see the module docstring: how far a true position may lie across a drawn line
+RASTER_BAND_ROWS = 32  # rows rasterised against one clipped piece of the area (see _rasterise)
+ROUND_SEGMENTS = 4  # segments per quarter circle of a buffer's rounded corners (shapely: 8); a 0.5 m arc, 1 cm off
+PLAN_GAP_M = 0.45  # slots between obstacles narrower than this are drawing gaps (a door is 0.7 m or more)
+
+
 @dataclass(frozen=True)
 class WalkableSettings:
     cell_m: float = 0.1  # grid resolution; 0.2 m halves the grid's memory four times, still finer than a step
     corridor_half_width_m: float = 1.0  # map points only: a 2 m corridor (a university corridor is 1.8-2.5 m)
     lateral_tolerance_m: float = 0.5  # map points only: how far off a direction's ray the next point may lie
     max_samples_per_check: int = 64  # bounds the scratch memory of one move check (longer moves loop)
+    # Floor plans only. 0 gives the plan's own area (then the grid's 0.12 m strip along every
+    # wall is not walkable); more than 0.2 m covers that strip, 0.5 m the site 1 waypoints in shops.
+    plan_tolerance_m: float = PLAN_TOLERANCE_M
+    plan_gap_m: float = PLAN_GAP_M
 
 
 @dataclass(frozen=True)
@@ -87,14 +116,44 @@ def corridors_geometry(corridors: tuple[Corridor, ...], half_width_m: float) -> 
     return shapely.union_all([line.buffer(half_width_m, cap_style="square") for line in lines])
 
 
-def floor_plan_geometry(floor_plan: tuple[list[list[list[float]]], ...]) -> BaseGeometry:
-    """The union of the floor plan's polygons (outer ring, then holes). Self-intersecting rings from
-    hand-drawn plans are repaired (shapely.make_valid) rather than rejected."""
-    repaired = [shapely.make_valid(shapely.Polygon(rings[0], rings[1:])) for rings in floor_plan]
-    # make_valid may split a ring into polygons plus stray lines; only areas are walkable
-    parts = [part for geometry in repaired for part in shapely.get_parts(geometry)
-             if isinstance(part, (shapely.Polygon, shapely.MultiPolygon))]
-    return shapely.union_all(parts)
+def plan_area(floor_plan: tuple[list[list[list[float]]], ...] | list) -> BaseGeometry:
+    """A floor plan's own walkable area: the union of its outer rings less the union of all its
+    holes (set semantics, see the module docstring). A self-intersecting ring from a hand-drawn
+    plan is repaired on its own (shapely.make_valid) rather than rejected; rings of fewer than
+    3 points are skipped."""
+    def areas(rings: list) -> BaseGeometry:
+        shapes = [shapely.make_valid(shapely.Polygon(ring)) for ring in rings if len(ring) >= 3]
+        # make_valid may split a ring into polygons plus stray lines; only areas count
+        return shapely.union_all([part for shape in shapes for part in shapely.get_parts(shape)
+                                  if isinstance(part, (shapely.Polygon, shapely.MultiPolygon))])
+
+    outlines = areas([rings[0] for rings in floor_plan if rings])
+    holes = areas([ring for rings in floor_plan for ring in rings[1:]])
+    return outlines.difference(holes) if not holes.is_empty else outlines
+
+
+def with_tolerance(area: BaseGeometry, tolerance_m: float, gap_m: float = PLAN_GAP_M) -> BaseGeometry:
+    """`area` with every obstacle (what is not walkable, the outside included) wider than
+    2 x `tolerance_m` pulled back by `tolerance_m`, thinner obstacles kept whole, after closing
+    the gaps between obstacles narrower than `gap_m`. 0 gives `area` unchanged."""
+    if tolerance_m <= 0.0 or area.is_empty:
+        return area
+    min_x, min_y, max_x, max_y = area.bounds
+    frame = shapely.box(min_x, min_y, max_x, max_y).buffer(2.0 * tolerance_m + gap_m + 1.0, join_style="mitre")
+    obstacles = frame.difference(area)
+    if gap_m > 0.0:  # closing: a slot between two shops drawn apart is filled, wider passages are kept
+        obstacles = obstacles.buffer(gap_m / 2.0, join_style="mitre").buffer(-gap_m / 2.0, join_style="mitre")
+    cores = obstacles.buffer(-tolerance_m, quad_segs=ROUND_SEGMENTS)  # what is left of the wide obstacles
+    thin = obstacles.difference(cores.buffer(tolerance_m, quad_segs=ROUND_SEGMENTS))  # walls, pillars, corner tips
+    walkable = frame.difference(shapely.union_all([cores, thin]))
+    return walkable.intersection(area.buffer(tolerance_m, quad_segs=ROUND_SEGMENTS))  # the frame's own margin is not walkable
+
+
+def floor_plan_geometry(floor_plan: tuple[list[list[list[float]]], ...] | list,
+                        tolerance_m: float = PLAN_TOLERANCE_M, gap_m: float = PLAN_GAP_M) -> BaseGeometry:
+    """The walkable area of a floor plan (polygons [outer ring, hole, ...] in metres): its own area
+    (`plan_area`) with the plan tolerance (`with_tolerance`). This is what the hub matches on."""
+    return with_tolerance(plan_area(floor_plan), tolerance_m, gap_m)
 
 
 class WalkableArea:
@@ -114,7 +173,8 @@ class WalkableArea:
         self.origin_x_m, self.origin_y_m = min_x, min_y
         self.columns = int(math.ceil((max_x - min_x) / cell_m)) + 1
         self.rows = int(math.ceil((max_y - min_y) / cell_m)) + 1
-        self.grid = self._rasterise(geometry.buffer(-self.clearance_m))
+        self.cells_geometry = geometry.buffer(-self.clearance_m, quad_segs=ROUND_SEGMENTS)  # where a walkable cell's centre may lie
+        self.grid = self._rasterise(self.cells_geometry)
 
     @classmethod
     def from_venue(cls, venue: Venue, settings: WalkableSettings = WalkableSettings(), floor: int = 0
@@ -122,7 +182,7 @@ class WalkableArea:
         """From the venue's floor plan when it has one, else from corridors between its map points
         on `floor`; ValueError when it has neither."""
         if venue.floor_plan:
-            geometry = floor_plan_geometry(venue.floor_plan)
+            return cls.from_floor_plan(venue.floor_plan, settings)
         else:
             points = tuple(p for p in venue.map_points if p.floor == floor)
             corridors, _ = corridor_graph(points, settings.lateral_tolerance_m)
@@ -131,10 +191,20 @@ class WalkableArea:
             geometry = corridors_geometry(corridors, settings.corridor_half_width_m)
         return cls(geometry, settings.cell_m, settings.max_samples_per_check)
 
+    @classmethod
+    def from_floor_plan(cls, floor_plan: tuple[list[list[list[float]]], ...] | list,
+                        settings: WalkableSettings = WalkableSettings()) -> "WalkableArea":
+        """From floor plan polygons ([outer ring, hole, ...] in metres), as `from_venue` reads them;
+        ValueError when they enclose no area."""
+        return cls(floor_plan_geometry(floor_plan, settings.plan_tolerance_m, settings.plan_gap_m),
+                   settings.cell_m, settings.max_samples_per_check)
+
     def _rasterise(self, eroded: BaseGeometry) -> np.ndarray:
         """Cells whose centre lies in `eroded`, one horizontal scan line per row: intersecting a
         line with the area gives the walkable runs directly (ILC plan at 0.1 m: 0.27 s against
-        0.73 s for testing every cell centre with shapely.contains_xy, same cells)."""
+        0.73 s for testing every cell centre with shapely.contains_xy, same cells). The lines go
+        in bands of rows, each against the area clipped to its band: a plan with the tolerance has
+        10-50 times the vertices, and a line against all of them took 18 s on site 1 B1 (0.8 s in bands)."""
         grid = np.zeros((self.rows, self.columns), dtype=bool)
         if eroded.is_empty:
             return grid
@@ -142,7 +212,12 @@ class WalkableArea:
         left_m, right_m = self.origin_x_m - self.cell_m, self.origin_x_m + (self.columns + 1) * self.cell_m
         lines = shapely.linestrings(np.stack([np.full(self.rows, left_m), centres_y,
                                               np.full(self.rows, right_m), centres_y], axis=1).reshape(-1, 2, 2))
-        runs = shapely.intersection(lines, eroded)
+        runs = np.empty(self.rows, dtype=object)
+        for first in range(0, self.rows, RASTER_BAND_ROWS):
+            last = min(first + RASTER_BAND_ROWS, self.rows)
+            band = shapely.clip_by_rect(eroded, left_m, centres_y[first] - self.cell_m / 4.0, right_m,
+                                        centres_y[last - 1] + self.cell_m / 4.0)
+            runs[first:last] = shapely.intersection(lines[first:last], band)
         for row, run in enumerate(runs):
             for part in shapely.get_parts(run):
                 if not isinstance(part, shapely.LineString) or part.is_empty:
@@ -199,3 +274,16 @@ class WalkableArea:
         if distances[best] > search_m:
             return None
         return float(centres_x[best]), float(centres_y[best])
+
+    def outside_by_m(self, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
+        """Per point, 0 where it is walkable, else how far it lies from the walkable cells (m): for
+        reporting truth positions or a fix that the map does not allow (exact distance to the area
+        the cells cover; a point next to a walkable cell, one cell at most)."""
+        x_m, y_m = np.atleast_1d(np.asarray(x_m, dtype=float)), np.atleast_1d(np.asarray(y_m, dtype=float))
+        walkable = self.is_walkable(x_m, y_m)
+        distance = np.zeros(x_m.shape)
+        outside = np.flatnonzero(~walkable)
+        if outside.size:
+            exact = shapely.distance(self.cells_geometry, shapely.points(x_m[outside], y_m[outside]))
+            distance[outside] = np.maximum(np.nan_to_num(exact, nan=math.inf), 0.01)  # 0: between cell centres
+        return distance

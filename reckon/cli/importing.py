@@ -1,4 +1,4 @@
-"""`reckon import csv|ngimu|tsnd|tracks|ilc`: recorded logs into session logs (reckon/importers/)."""
+"""`reckon import csv|ngimu|tsnd|tracks|ilc|getsensordata`: recorded logs into session logs (reckon/importers/)."""
 
 from __future__ import annotations
 
@@ -20,6 +20,14 @@ def run_import(args: argparse.Namespace, progress: Callable[[str], None]) -> int
     if len(args.folder) != 1:
         raise ReckonError(f"reckon import {args.format}: one PATH expected, got {len(args.folder)}")
     args.folder = args.folder[0]
+    if args.format == "getsensordata":
+        from reckon.importers.geo import parse_lat_lon
+        from reckon.importers.getsensordata_session import import_getsensordata
+
+        origin = parse_lat_lon(args.origin, "--origin") if args.origin else None
+        print(import_getsensordata(Path(args.folder), Path(args.output),
+                                   beacons_csv=Path(args.beacons) if args.beacons else None, origin=origin))
+        return 0
     if args.format == "tracks":
         from reckon.importers.tracks_csv import import_tracks_csv
 
@@ -52,12 +60,14 @@ def run_import(args: argparse.Namespace, progress: Callable[[str], None]) -> int
 
 def register(sub: Any) -> None:
     imp = sub.add_parser("import", help="convert recorded logs into a session log")
-    imp.add_argument("format", choices=["csv", "ngimu", "tsnd", "tracks", "ilc"],
+    imp.add_argument("format", choices=["csv", "ngimu", "tsnd", "tracks", "ilc", "getsensordata"],
                      help="csv: docs/csv-import.md; ngimu: x-io NGIMU folders; tsnd: an ATR TSND121/151 CSV log; "
                           "tracks: a camera tracker's tracks, MOTChallenge-style CSV; ilc: Indoor Location "
-                          "Competition 2.0 phone walks (docs/pdr-estimator.md)")
+                          "Competition 2.0 phone walks (docs/pdr-estimator.md); getsensordata: a GetSensorData "
+                          "app log, IPIN's smartphone tracks (docs/getsensordata-import.md)")
     imp.add_argument("folder", metavar="PATH", nargs="+",
-                     help="the folder (csv, ngimu), the CSV file (tsnd, tracks), or walk files (ilc: several)")
+                     help="the folder (csv, ngimu), the CSV file (tsnd, tracks), the log (getsensordata), or walk "
+                          "files (ilc: several)")
     imp.add_argument("-o", "--output", required=True,
                      help="the session log; ilc with several walks: a folder for one log per walk")
     ngimu = imp.add_argument_group("ngimu and tsnd options")
@@ -78,4 +88,10 @@ def register(sub: Any) -> None:
     tracks.add_argument("--start", metavar="UNIX_S", help="time of frame 1 in seconds, when the file has no time column")
     tracks.add_argument("--position-sd", type=float, metavar="M",
                         help="the tracker's 1-sigma position error per axis (default 0.1 m, with a warning)")
+    gsd = imp.add_argument_group("getsensordata options (docs/getsensordata-import.md)")
+    gsd.add_argument("--beacons", metavar="BEACONS.csv",
+                     help="the venue's beacons: CSV id,lat,lon,floor, id ibeacon:<uuid>:<major>:<minor> or "
+                          "eddystone:<namespace>:<instance> (or eddystone:<instance>)")
+    gsd.add_argument("--origin", metavar="LAT,LON",
+                     help="the local frame's tangent point, decimal degrees (default: the first POSI point)")
     imp.set_defaults(run=run_import)

@@ -9,6 +9,11 @@ both rows of a method: the edge's poses (no map matching) and the hub's (map mat
   floor plan alone it has nothing to snap to and its map-matched row is left out (noted);
 - reckon: edge/pedestrian/estimator.py and the particle filter over the walkable area (hub/pedestrian/particles.py).
 
+The hub's live poses that are the edge's own track because the map contradicted it (the map
+guard, hub/pedestrian/guard.py: `map_fallback` on the pose) are counted per method; and every
+truth position of a session with a map is checked against the walkable area the hub matches on
+(hub/pedestrian/walkable.py): how many lie outside it and how far (a map problem, reported).
+
 Scoring: every truth pose after the agent's first accepted stand scan is a waypoint; the estimate
 there is interpolated between the track's poses (the stand pose starts each track). Over the
 waypoints of every session given: median, p75 and p90 of the position error in metres. Where the
@@ -29,6 +34,7 @@ from edge.pedestrian.edge import PedestrianEdge
 from hub.pedestrian.matching import SnapStage
 from hub.pedestrian.paper import PaperSnapMatcher
 from hub.pedestrian.hub import PedestrianHub, particle_matcher_factory
+from hub.pedestrian.walkable import WalkableArea
 from protocol import messages
 from protocol.errors import InputError
 from protocol.session import AgentKind, Mount, Session
@@ -81,6 +87,8 @@ class PhoneRun:
     hub: Track | None = None  # None: no map matcher for this method on this venue
     refined: Track | None = None  # the hub's pose/refined (a matcher with a lag), else None
     snaps: list[Any] = field(default_factory=list)  # the paper's SnapRecords
+    live_poses: int = 0  # the hub's pose/live
+    fallback_poses: int = 0  # ... of which the edge's own track (map_fallback)
 
 
 @dataclass
@@ -96,6 +104,17 @@ class WaypointErrors:
     snaps_correct: int | None = None
     snaps_total: int | None = None  # true turns
     snaps_wrong: int | None = None  # applied position snaps matching no true turn
+    live_poses: int = 0  # the hub's track rows: its poses, and those on the edge's track (map_fallback)
+    fallback_poses: int = 0
+
+
+@dataclass(frozen=True)
+class WalkableTruth:
+    """One session's truth positions against the walkable area the hub matches on."""
+
+    session: str
+    positions: int
+    outside_m: tuple[float, ...]  # the distance of each position outside, in time order
 
 
 @dataclass
@@ -103,6 +122,7 @@ class PedestrianReport:
     sessions: list[str]
     rows: list[WaypointErrors] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
+    walkable: list[WalkableTruth] = field(default_factory=list)  # sessions with a map
 
 
 def phones(session: Session) -> list[tuple[Any, Any]]:
@@ -111,16 +131,18 @@ def phones(session: Session) -> list[tuple[Any, Any]]:
             if sensor.mount in (Mount.HAND, Mount.POCKET)]
 
 
-def run_method(session: Session, inputs: list[Any], method: str) -> list[PhoneRun]:
+def run_method(session: Session, inputs: list[Any], method: str, area: WalkableArea | None = None
+               ) -> list[PhoneRun]:
     """Push the session's phone batches and stand scans through one edge per phone and its hub
-    (a hub per phone: the hub keys its matchers by agent, and one agent may carry two phones)."""
+    (a hub per phone: the hub keys its matchers by agent, and one agent may carry two phones).
+    `area`: the venue's walkable area when already built."""
     if method == "paper":
         from edge.pedestrian.paper import PaperPdr
 
         points = session.venue.map_points
         factory = (lambda agent_id: PaperSnapMatcher(points)) if points else None  # noqa: E731
     else:
-        factory = particle_matcher_factory(session.venue)
+        factory = particle_matcher_factory(session.venue, area)
     runs: dict[str, tuple[PhoneRun, PedestrianEdge, PedestrianHub | None]] = {}
     for agent, sensor in phones(session):
         estimator = PaperPdr(height_m=agent.height_m) if method == "paper" else None
@@ -153,6 +175,9 @@ def run_method(session: Session, inputs: list[Any], method: str) -> list[PhoneRu
 def _take(run: PhoneRun, outputs: list[Any]) -> None:
     for out in outputs:
         track = run.refined if out.track == messages.Track.REFINED else run.hub
+        if out.track != messages.Track.REFINED:
+            run.live_poses += 1
+            run.fallback_poses += bool(out.map_fallback)
         if track is not None:
             track.add(out.timestamp_ns, out.x_m, out.y_m, out.heading_rad)
 
@@ -171,9 +196,13 @@ def evaluate_pedestrians(sessions: list[tuple[SessionData, Path]],
         if missing:
             raise InputError(f"{path}: no truth poses for {', '.join(missing)}; `reckon eval` scores against truth")
         inputs = read_inputs(path)
+        venue = data.session.venue
+        area = WalkableArea.from_venue(venue) if venue.floor_plan or venue.map_points else None
+        if area is not None:
+            report.walkable.append(walkable_truth(data, path, area))
         for method in ("paper", "reckon"):
             progress(f"{path.name}: {method}")
-            runs = run_method(data.session, inputs, method)
+            runs = run_method(data.session, inputs, method, area)
             for mount in sorted({run.mount for run in runs}):
                 chosen = [run for run in runs if run.mount == mount]
                 report.rows.append(score(data, path, method, mount, chosen, "edge", "none"))
@@ -188,6 +217,14 @@ def evaluate_pedestrians(sessions: list[tuple[SessionData, Path]],
                                f"paper's turn snap has nothing to snap to there ({', '.join(no_points[:3])}"
                                f"{', ...' if len(no_points) > 3 else ''})")
     return report
+
+
+def walkable_truth(data: SessionData, path: Path, area: WalkableArea) -> WalkableTruth:
+    """Every truth position of the session against `area`."""
+    x_m = np.concatenate([truth.x_m for truth in data.truth.values()])
+    y_m = np.concatenate([truth.y_m for truth in data.truth.values()])
+    distances_m = area.outside_by_m(x_m, y_m) if len(x_m) else np.array([])
+    return WalkableTruth(path.name, len(x_m), tuple(float(d) for d in distances_m if d > 0.0))
 
 
 def score(data: SessionData, path: Path, method: str, mount: str, runs: list[PhoneRun], track_name: str,
@@ -222,6 +259,9 @@ def score(data: SessionData, path: Path, method: str, mount: str, runs: list[Pho
         row.snaps_correct, row.snaps_total, row.snaps_wrong = _snap_score(
             [t for t in turns if any(t.get("agent_id", r.agent_id) == r.agent_id for r in runs)],
             [(r.agent_id, snap) for r in runs for snap in r.snaps])
+    if track_name == "live":
+        row.live_poses = sum(r.live_poses for r in runs)
+        row.fallback_poses = sum(r.fallback_poses for r in runs)
     return row
 
 
@@ -280,8 +320,14 @@ def to_json(report: PedestrianReport) -> dict[str, Any]:
                         "waypoints": int(len(errors)), "waypoint_error_m": _percentiles(errors),
                         "heading_error_after_turn_deg": _percentiles(headings) if len(headings) else None,
                         "turn_snaps": _snaps(rows),
+                        "map_fallback": ({"poses": sum(r.fallback_poses for r in rows),
+                                          "of_live_poses": sum(r.live_poses for r in rows)}
+                                         if map_matching and track == "live" else None),
                         "per_session_p75_m": {r.session: _percentiles(r.errors_m)["p75"] for r in rows}})
-    return {"sessions": report.sessions, "results": results, "problems": report.problems}
+    return {"sessions": report.sessions, "results": results, "problems": report.problems,
+            "walkable_truth": [{"session": w.session, "positions": w.positions, "outside": len(w.outside_m),
+                                "farthest_outside_m": round(max(w.outside_m), 3) if w.outside_m else None}
+                               for w in report.walkable]}
 
 
 def to_table(report: PedestrianReport) -> str:
@@ -307,5 +353,24 @@ def to_table(report: PedestrianReport) -> str:
             for r in rows:
                 by_session.setdefault(r.session, []).append(fmt(_percentiles(r.errors_m)["p75"]))
         lines += [f"  {name}: {'  '.join(values)}" for name, values in by_session.items()]
+    fallbacks = [(key, rows) for key, _, _, rows in pooled(report) if key[1] and key[3] == "live"
+                 and any(r.fallback_poses for r in rows)]
+    for (method, _, matcher, _, mount), rows in fallbacks:
+        lines.append(f"map guard: {method}+{matcher} ({mount}): {sum(r.fallback_poses for r in rows)} of "
+                     f"{sum(r.live_poses for r in rows)} live poses on the edge's track (the map contradicted it), "
+                     f"in {sum(1 for r in rows if r.fallback_poses)} of {len(rows)} sessions")
+    if report.walkable:
+        lines.append(walkable_line(report.walkable))
     lines += [f"note: {problem}" for problem in report.problems]
     return "\n".join(lines)
+
+
+def walkable_line(checks: list[WalkableTruth]) -> str:
+    """`truth positions walkable: 345 of 347; outside: a.mcap 2 (farthest 0.31 m)`."""
+    total = sum(w.positions for w in checks)
+    outside = [w for w in checks if w.outside_m]
+    text = f"truth positions walkable for the hub: {total - sum(len(w.outside_m) for w in checks)} of {total}"
+    if not outside:
+        return text
+    return text + "; outside: " + ", ".join(f"{w.session} {len(w.outside_m)} (farthest {max(w.outside_m):.2f} m)"
+                                           for w in outside[:8]) + (", ..." if len(outside) > 8 else "")

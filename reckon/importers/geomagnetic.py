@@ -1,7 +1,7 @@
 """The undisturbed Earth field at a place and date, from the World Magnetic Model (pygeomag).
 
 For a venue whose floor plan is geo-referenced (ILC's GeoJSON is in longitude/latitude, east to
-+x and north to +y after reckon.importers.ilc.floor_plan_metres), this gives the venue's
++x and north to +y after reckon.importers.ilc_plan.read_floor_plan), this gives the venue's
 `magnetic_north_deg`, `magnetic_field_ut` and `magnetic_dip_deg` (protocol/session.py): what a
 phone's magnetometer should read where the building does not bend the field.
 """

@@ -1,4 +1,5 @@
-"""Indoor Location Competition 2.0 walk files (`.txt` or `.txt.gz`) and floor plans, as numpy arrays.
+"""Indoor Location Competition 2.0 walk files (`.txt` or `.txt.gz`), as numpy arrays (floor plans:
+reckon/importers/ilc_plan.py).
 
 Source: location-competition/indoor-location-competition-20 (MIT), commit 8ab177cd, data/site1/F1
 (shared/data/pdr/ilc-site1-F1, see its PROVENANCE.tsv). A walk file is tab-separated text:
@@ -31,7 +32,7 @@ import math
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Iterator
 
 import numpy as np
 
@@ -235,103 +236,3 @@ def _numbers(values: list[str], counts: tuple[int, ...], keep: int, kind: str, w
             raise InputError(f"{where}: {kind} value {_show(text)} is not a finite number")
         numbers.append(number)
     return tuple(numbers)
-
-
-def floor_plan_metres(geojson: dict[str, Any], width_m: float, height_m: float) -> list[list[list[list[float]]]]:
-    """The walkable area of an ILC floor in the floor-plan frame (metres), as `[outer, hole, ...]`
-    polygons whose rings are lists of [x, y].
-
-    ILC's convention (checked on site1/F1: every waypoint of the 10 walks falls inside the outline,
-    docs/pdr-estimator.md): the bounding box of the `floor` feature (lon/lat degrees) maps linearly
-    onto [0, width_m] x [0, height_m], east to +x, north to +y. The floor feature (a MultiPolygon,
-    or a Polygon) is the outline; every other Polygon is a shop or obstacle and becomes a hole of
-    the outline polygon holding most of its vertices (one wholly outside every outline is dropped).
-    Test walkability with `in_walkable_area` (inside an outline, outside its holes).
-    InputError on a GeoJSON without a floor feature or with malformed coordinates.
-    """
-    features = geojson.get("features") if isinstance(geojson, dict) else None
-    if not isinstance(features, list):
-        raise InputError("floor plan: the GeoJSON has no 'features' list")
-    floors = [f for f in features if _properties(f).get("type") == "floor"]
-    if len(floors) != 1:
-        raise InputError(f"floor plan: expected one feature with properties.type 'floor', found {len(floors)}")
-    outlines = _polygons(floors[0], "floor feature")
-    if not outlines:
-        raise InputError("floor plan: the floor feature has no polygon")
-    corners = np.concatenate([np.array(ring) for polygon in outlines for ring in polygon])
-    low, high = corners.min(axis=0), corners.max(axis=0)
-    if not np.all(high > low) or not (width_m > 0 and height_m > 0):
-        raise InputError(f"floor plan: degenerate bounding box {low.tolist()}-{high.tolist()} or map size "
-                         f"{width_m} x {height_m} m")
-    scale = np.array([width_m, height_m]) / (high - low)
-
-    def to_metres(ring: list[list[float]]) -> list[list[float]]:
-        return ((np.array(ring, dtype=float) - low) * scale).tolist()
-
-    plan = [[to_metres(polygon[0])] for polygon in outlines]  # holes of the outline itself are not used
-    for index, feature in enumerate(features):
-        if feature is floors[0]:
-            continue
-        for polygon in _polygons(feature, f"feature {index}"):
-            hole = to_metres(polygon[0])
-            # Shops along the outer wall straddle the outline (20 of 172 on site1/F1): a hole goes to
-            # the outline holding most of its vertices, so a hole may cross its outline's edge.
-            inside = [sum(point_in_ring(point, outline[0]) for point in hole) for outline in plan]
-            if max(inside) > 0:
-                plan[inside.index(max(inside))].append(hole)
-    return plan
-
-
-def floor_centre_lonlat(geojson: dict[str, Any]) -> tuple[float, float]:
-    """(longitude, latitude) in degrees of the centre of the floor feature's bounding box."""
-    floors = [f for f in geojson.get("features", []) if _properties(f).get("type") == "floor"]
-    if len(floors) != 1:
-        raise InputError(f"floor plan: expected one feature with properties.type 'floor', found {len(floors)}")
-    corners = np.concatenate([np.array(ring) for polygon in _polygons(floors[0], "floor feature") for ring in polygon])
-    low, high = corners.min(axis=0), corners.max(axis=0)
-    return float(low[0] + high[0]) / 2.0, float(low[1] + high[1]) / 2.0
-
-
-def _properties(feature: Any) -> dict[str, Any]:
-    properties = feature.get("properties") if isinstance(feature, dict) else None
-    return properties if isinstance(properties, dict) else {}
-
-
-def _polygons(feature: Any, where: str) -> list[list[list[list[float]]]]:
-    geometry = feature.get("geometry") if isinstance(feature, dict) else None
-    kind = geometry.get("type") if isinstance(geometry, dict) else None
-    if kind not in ("Polygon", "MultiPolygon"):
-        return []
-    polygons = [geometry["coordinates"]] if kind == "Polygon" else geometry["coordinates"]
-    for polygon in polygons:
-        for ring in polygon:
-            if (not isinstance(ring, list) or len(ring) < 3
-                    or not all(isinstance(p, list) and len(p) >= 2 and all(map(_is_number, p[:2])) for p in ring)):
-                raise InputError(f"floor plan: {where} has a ring that is not a list of >= 3 [lon, lat] points")
-    return [[[point[:2] for point in ring] for ring in polygon] for polygon in polygons]
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def point_in_ring(point: list[float] | tuple[float, float], ring: list[list[float]]) -> bool:
-    """Even-odd rule: is (x, y) inside the closed ring (first point need not repeat)?"""
-    x, y = point
-    inside = False
-    previous_x, previous_y = ring[-1]
-    for current_x, current_y in ring:
-        if (current_y > y) != (previous_y > y):
-            crossing_x = previous_x + (y - previous_y) * (current_x - previous_x) / (current_y - previous_y)
-            if x < crossing_x:
-                inside = not inside
-        previous_x, previous_y = current_x, current_y
-    return inside
-
-
-def in_walkable_area(point: tuple[float, float], plan: list[list[list[list[float]]]]) -> bool:
-    """Inside some outline and outside all of its holes."""
-    for polygon in plan:
-        if point_in_ring(point, polygon[0]):
-            return not any(point_in_ring(point, hole) for hole in polygon[1:])
-    return False

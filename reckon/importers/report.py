@@ -64,3 +64,46 @@ class ImportReport:
             lines.append("warnings:")
             lines.extend(f"  - {warning}" for warning in self.warnings)
         return "\n".join(lines)
+
+
+OUTSIDE_SHOWN = 8  # truth positions outside the walkable area listed by name; the rest are counted
+
+
+@dataclass(frozen=True)
+class WalkableCheck:
+    """Truth positions against the hub's walkable area (hub/pedestrian/walkable.py, as the hub
+    builds it from the session's venue): how many lie inside, and each one outside with its
+    distance to the area in metres, in order. A position outside is a map problem to report (a
+    shop drawn over a corridor, a frame off), not an import error. `problem`: why nothing could
+    be checked (the hub finds no walkable area in the plan)."""
+
+    total: int
+    outside: tuple[tuple[str, float], ...] = ()  # (label such as "wp 12", metres outside)
+    problem: str = ""
+
+    @property
+    def inside(self) -> int:
+        return self.total - len(self.outside)
+
+    @staticmethod
+    def combine(checks: list[tuple[str, "WalkableCheck"]]) -> "WalkableCheck":
+        """Several walks' checks as one, each label prefixed with its walk's name."""
+        problems = sorted({check.problem for _, check in checks if check.problem})
+        return WalkableCheck(sum(check.total for _, check in checks),
+                             tuple((f"{name} {label}", distance_m) for name, check in checks
+                                   for label, distance_m in check.outside), "; ".join(problems))
+
+    def __str__(self) -> str:
+        return self.text("walkable")
+
+    def text(self, name: str) -> str:
+        """`name: 44 of 47 waypoints inside; outside: ...`, the farthest named."""
+        if self.problem:
+            return f"{name}: not checked ({self.problem})"
+        text = f"{name}: {self.inside} of {self.total} waypoints inside"
+        if not self.outside:
+            return text
+        shown = ", ".join(f"{label} {distance_m:.2f} m" for label, distance_m in self.outside[:OUTSIDE_SHOWN])
+        more = f", and {len(self.outside) - OUTSIDE_SHOWN} more" if len(self.outside) > OUTSIDE_SHOWN else ""
+        farthest, distance_m = max(self.outside, key=lambda item: item[1])
+        return f"{text}; outside: {shown}{more}; farthest {farthest}, {distance_m:.2f} m"

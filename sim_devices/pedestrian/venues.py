@@ -8,7 +8,7 @@ checked against the walkable area with shapely (a body-wide strip along it must 
 - `paper`: the map of the paper's table 5 (building 2, floor 1 of Chiba Institute of Technology;
   coordinates in cm, here in m) and its route I-J-G-H-L-K-E-F-B-C-G-H-D-A-E-F-I (sec. 4.2; 280 m,
   15 corners of 90 deg; the paper counts 7 left and 7 right, the table's geometry gives 8 left and
-  7 right). Corridors 2 m wide (hub.pedestrian.walkable's default for a map without a plan).
+  7 right). Corridors 2 m wide (hub.pedestrian.walkable's corridors for a map without a plan).
 - `floorplan`: a 46 m x 24 m floor drawn here (no file is read): a loop corridor 2.4 m wide around
   a block of six rooms with 1 m doors (and a walled-off store room), and a 10 m x 20 m hall with
   two pillars at its east end. The walkable area is one polygon with holes (the block's walls, the
@@ -24,12 +24,13 @@ from dataclasses import dataclass
 import shapely
 from shapely.geometry.base import BaseGeometry
 
+from hub.pedestrian.walkable import WalkableSettings, corridor_graph, corridors_geometry, plan_area
+
 from protocol.errors import ConfigError
 from protocol.session import MapPoint, Stand
 
 PRESETS = ("paper", "floorplan")
 BODY_HALF_WIDTH_M = 0.25  # half a shoulder width: the strip along a route that must be walkable
-PAPER_CORRIDOR_HALF_WIDTH_M = 1.0  # hub.pedestrian.walkable's corridor for a map without a floor plan
 
 # The paper's table 5: point, x cm, y cm, unit vectors of the corridors leaving it.
 PAPER_TABLE_5 = (
@@ -99,19 +100,10 @@ def _paper(offset_m: float, people: int) -> Layout:
     route = Route(PAPER_ROUTE, tuple(where[n] for n in PAPER_ROUTE))
     stands = [_stand_after(route, 0, "stand-I", 0.0)]
     stands += [_stand_after(route, i, f"stand-{PAPER_ROUTE[i]}", offset_m) for i in PAPER_STAND_NODES]
-    geometry = paper_geometry(points)
+    geometry = area_of((), points)
     min_x, min_y, max_x, max_y = geometry.bounds
     return Layout("paper", "pdr-paper", points, (), tuple(stands), (route,) * people,
                   (max_x - min_x, max_y - min_y))
-
-
-def paper_geometry(points: tuple[MapPoint, ...]) -> BaseGeometry:
-    """The paper map's corridors (each pair of points joined along a listed direction), 2 m wide."""
-    where = {p.id: (p.x_m, p.y_m) for p in points}
-    lines = []
-    for start, end in zip(PAPER_ROUTE, PAPER_ROUTE[1:]):  # the route walks every corridor of the map
-        lines.append(shapely.LineString([where[start], where[end]]))
-    return shapely.union_all([line.buffer(PAPER_CORRIDOR_HALF_WIDTH_M, cap_style="square") for line in lines])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -207,9 +199,18 @@ def layout(preset: str, people: int, stand_offset_m: float = 1.0) -> Layout:
 
 
 def walkable_geometry(result: Layout) -> BaseGeometry:
-    if result.floor_plan:
-        return shapely.union_all([shapely.Polygon(rings[0], rings[1:]) for rings in result.floor_plan])
-    return paper_geometry(result.map_points)
+    return area_of(result.floor_plan, result.map_points)
+
+
+def area_of(floor_plan: tuple[list[list[list[float]]], ...], map_points: tuple[MapPoint, ...]) -> BaseGeometry:
+    """The walkable area by the hub's one definition (hub/pedestrian/walkable.py): the plan's own
+    area, without the hub's tolerance for drawn lines (a simulated walker keeps out of the shops),
+    or the corridors the hub draws between the map points."""
+    if floor_plan:
+        return plan_area(floor_plan)
+    settings = WalkableSettings()
+    corridors, _ = corridor_graph(map_points, settings.lateral_tolerance_m)
+    return corridors_geometry(corridors, settings.corridor_half_width_m)
 
 
 def route_problem(route: Route, area: BaseGeometry) -> str:

@@ -40,6 +40,7 @@ def test_every_message_round_trips_with_schema_version():
                            other_agent_id="b"),
         "TruthContact": dict(timestamp_ns=7, agent_id="a", other_agent_id="b", kind=messages.ContactKind.LATERAL,
                              closing_speed_mps=1.5),
+        "Pressure": dict(timestamp_ns=15, agent_id="walker", sensor_id="phone", pressure_hpa=1013.2456),
         "PositionFix": dict(timestamp_ns=8, agent_id="a", kind=messages.CorrectionKind.MANUAL, x_m=1.0, y_m=2.0,
                             covariance=[0.25, 0.0, 0.0, 0.25], source_id="operator"),
         "SwimLength": dict(timestamp_ns=9, agent_id="a", sensor_id="s", method="reckon", index=2, start_ns=1,

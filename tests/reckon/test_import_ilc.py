@@ -106,6 +106,7 @@ def test_eval_on_real_walks_prints_both_methods(tmp_path: Path, capsys):
         assert row["waypoints"] >= 20 and 0.0 <= errors["median"] <= errors["p75"] <= errors["p90"]
         assert errors["p90"] < 60.0  # a sanity bound: the walks are 60-100 m long
     assert any("turn snap has nothing to snap to" in note for note in report["problems"])
+    assert [w["outside"] for w in report["walkable_truth"]] == [0, 0]  # every waypoint walkable for the hub
     assert main(["eval", *logs]) == 0
     table = capsys.readouterr().out
     assert "particle filter" in table and "p75 per session" in table
