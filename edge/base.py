@@ -6,7 +6,7 @@
     outputs = edge.flush()             # end of stream
 
 The three edges (edge/chair/edge.py, edge/swim/edge.py, edge/pedestrian/edge.py) satisfy `Edge`;
-an input an edge has no use for (a Correction for a swimmer, a StandScan for a chair) is taken and
+an input an edge has no use for (a Correction for a swimmer, a StandScan or a Pressure for a chair) is taken and
 ignored, so the caller never asks which kind it holds. Pure: no I/O, no clock.
 """
 
@@ -73,6 +73,10 @@ class Edge(Protocol):
 
     def scan(self, scan: Any) -> None:
         """A StandScan of this agent, accepted or refused (ignored by an edge without stands)."""
+        ...
+
+    def pressure(self, reading: Any) -> None:
+        """A Pressure reading of this agent's barometer (ignored by an edge without floors)."""
         ...
 
     def warnings(self) -> list[str]:

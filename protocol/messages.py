@@ -100,6 +100,7 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("x_m", "double", False),
         ("y_m", "double", False),
         ("heading_rad", "double", False),
+        ("floor", "int64", False),  # a building's floor (0 where the venue has one); the IPIN score counts it
     ],
     "EstimatedPose": [
         ("schema_version", "uint32", False),
@@ -115,6 +116,7 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         # A pedestrian's pose/live and pose/refined: the floor plan contradicted the dead-reckoned
         # track, and this pose is the edge's own track shifted by the last agreed offset (hub/pedestrian/guard.py).
         ("map_fallback", "bool", False),
+        ("floor", "int64", False),  # a pedestrian's floor: the last stand's, plus the changes the barometer saw
     ],
     "ImpactEvent": [
         ("schema_version", "uint32", False),

@@ -85,6 +85,7 @@ class Beacon:
     # What the beacon advertises, canonical: "ibeacon:<uuid>:<major>:<minor>" or
     # "eddystone:<namespace, 20 hex>:<instance, 12 hex>". None: not heard by `ble://scan`.
     identity: str | None = None
+    floor: int = 0  # a building's floor; a phone on another floor does not take a fix from it
 
 
 @dataclass(frozen=True)
@@ -125,6 +126,9 @@ class Venue:
     # a session log so the log stands alone. Each polygon is [outer ring, hole, hole, ...], a ring
     # a list of [x, y].
     floor_plan: tuple[Any, ...] = ()
+    # A building with floors that differ: (floor, polygons) per floor, each as floor_plan. A floor
+    # not listed has floor_plan (the plan of every floor, or of the venue's one floor).
+    floor_plans: tuple[tuple[int, tuple[Any, ...]], ...] = ()
     # The Earth's field at the venue, for phones' magnetometers (edge/pedestrian/magnetic.py): the direction
     # of magnetic north in the venue frame (deg, counter-clockwise from +x: true north's direction
     # minus the declination), and the undisturbed field's strength and dip, which tell a clean reading
@@ -132,6 +136,15 @@ class Venue:
     magnetic_north_deg: float | None = None
     magnetic_field_ut: float | None = None
     magnetic_dip_deg: float | None = None
+
+    def plan_of(self, floor: int) -> tuple[Any, ...]:
+        """The walkable polygons of one floor."""
+        return next((plan for number, plan in self.floor_plans if number == floor), self.floor_plan)
+
+    @property
+    def floors(self) -> tuple[int, ...]:
+        """The floors with a plan of their own, in order."""
+        return tuple(sorted(number for number, _ in self.floor_plans))
 
 
 @dataclass(frozen=True)
@@ -272,6 +285,7 @@ def _beacon(data: dict[str, Any], where: str) -> Beacon:
         tx_power_dbm=_number(data, "tx_power_dbm", where, -59.0, -120.0, 20.0),
         height_m=_number(data, "height_m", where, 2.9, 0.0, 20.0),
         identity=None if data.get("identity") is None else beacon_identity(data["identity"], f"{where}.identity"),
+        floor=_integer(data, "floor", where, 0, -20, 200),
     )
 
 
@@ -407,6 +421,29 @@ def floor_plan_from(value: Any, where: str, base: Path | None = None) -> tuple[A
     return tuple(plan)
 
 
+def floor_plans_from(value: Any, where: str, base: Path | None = None) -> tuple[tuple[int, tuple[Any, ...]], ...]:
+    """Per-floor plans from a table {floor: plan} (venue file: keys are strings, "1" or "-1") or
+    the session log's list of [floor, plan] pairs; each plan as `floor_plan_from` reads it."""
+    if isinstance(value, dict):
+        pairs = list(value.items())
+    elif isinstance(value, list) and all(isinstance(pair, list) and len(pair) == 2 for pair in value):
+        pairs = [(str(number), plan) for number, plan in value]
+    else:
+        raise ConfigError(f"{where}: expected a table of floor = plan (\"1\" = \"floor1.geojson\")")
+    plans = {}
+    for key, plan in pairs:
+        try:
+            number = int(key)
+        except (TypeError, ValueError):
+            number = None
+        if number is None or not -20 <= number <= 200:
+            raise ConfigError(f"{where}: floor {key!r} is not a whole number in -20..200")
+        if number in plans:
+            raise ConfigError(f"{where}: floor {number} given twice")
+        plans[number] = floor_plan_from(plan, f"{where}.{key}", base)
+    return tuple(sorted(plans.items()))
+
+
 def session_from_dict(data: dict[str, Any], where: str = "session", base: Path | None = None) -> Session:
     """Validate a plain dict (from TOML or JSON) into a Session; ConfigError names the key path.
     `base` is the folder that relative file names in it (the floor plan) are read from."""
@@ -434,6 +471,7 @@ def session_from_dict(data: dict[str, Any], where: str = "session", base: Path |
                          for i, b in enumerate(_list(venue_data, "map_points", vwhere))),
         floor_plan=floor_plan_from(venue_data["floor_plan"], f"{vwhere}.floor_plan", base)
         if "floor_plan" in venue_data else (),
+        floor_plans=floor_plans_from(venue_data.get("floor_plans", {}), f"{vwhere}.floor_plans", base),
         magnetic_north_deg=_optional_number(venue_data, "magnetic_north_deg", vwhere, -360.0, 360.0),
         magnetic_field_ut=_optional_number(venue_data, "magnetic_field_ut", vwhere, 20.0, 70.0),
         magnetic_dip_deg=_optional_number(venue_data, "magnetic_dip_deg", vwhere, -90.0, 90.0),
@@ -475,10 +513,12 @@ def to_dict(session: Session) -> dict[str, Any]:
             return value.value
         if dataclasses.is_dataclass(value) and not isinstance(value, type):
             fields = {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
-            if isinstance(value, Beacon) and value.identity is None:
-                del fields["identity"]  # optional and newer: logs without identities stay as they were
+            if isinstance(value, Beacon):  # optional and newer: logs without them stay as they were
+                for name, default in (("identity", None), ("floor", 0)):
+                    if fields[name] == default:
+                        del fields[name]
             if isinstance(value, Venue):  # newer and optional: older logs stay byte-identical
-                for name in ("stands", "map_points", "floor_plan"):
+                for name in ("stands", "map_points", "floor_plan", "floor_plans"):
                     if not fields[name]:
                         del fields[name]
             if isinstance(value, Agent) and value.kind is not AgentKind.PEDESTRIAN:

@@ -78,6 +78,7 @@ class TruthSeries:
     x_m: np.ndarray
     y_m: np.ndarray
     heading_rad: np.ndarray
+    floor: np.ndarray | None = None  # int64 per pose; None: every pose on floor 0 (a log without floors)
 
 
 @dataclass
@@ -241,7 +242,7 @@ def read_session(path: Path | str) -> SessionData:
         if kind == "ImuBatch":
             batches[msg.sensor_id].append(msg)
         elif kind == "TruthPose":
-            truth_rows[msg.agent_id].append((msg.timestamp_ns, msg.x_m, msg.y_m, msg.heading_rad))
+            truth_rows[msg.agent_id].append((msg.timestamp_ns, msg.x_m, msg.y_m, msg.heading_rad, msg.floor))
         elif kind == "BeaconSighting":
             sighting_rows[msg.agent_id].append((msg.timestamp_ns, msg.beacon_id, msg.rssi_dbm))
         elif kind == "TruthContact":
@@ -266,8 +267,11 @@ def read_session(path: Path | str) -> SessionData:
            for sensor_id, rows in batches.items()}
     truth = {}
     for agent_id, rows in truth_rows.items():
-        arr = np.array(sorted(rows), dtype=np.float64)
-        truth[agent_id] = TruthSeries(np.array([r[0] for r in sorted(rows)], dtype=np.int64), arr[:, 1], arr[:, 2], arr[:, 3])
+        rows.sort()
+        arr = np.array(rows, dtype=np.float64)
+        floors = np.array([r[4] for r in rows], dtype=np.int64)
+        truth[agent_id] = TruthSeries(np.array([r[0] for r in rows], dtype=np.int64), arr[:, 1], arr[:, 2], arr[:, 3],
+                                      floors if floors.any() else None)
     sightings = {}
     for agent_id, rows in sighting_rows.items():
         rows.sort(key=lambda r: r[0])

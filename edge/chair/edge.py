@@ -65,6 +65,9 @@ class ChairEdge:
     def scan(self, scan: Any) -> None:
         """A chair has no stands to scan."""
 
+    def pressure(self, reading: Any) -> None:
+        """A chair has no floors to count."""
+
     def warnings(self) -> list[str]:
         return []
 

@@ -1,5 +1,5 @@
-"""A pedestrian's edge computation, without I/O: phone ImuBatch and StandScan messages in,
-per-step EstimatedPose messages out.
+"""A pedestrian's edge computation, without I/O: phone ImuBatch, StandScan and Pressure messages
+in, per-step EstimatedPose messages out.
 
 The phone's batches (protocol units: g, deg/s, gauss, the phone's own axes) become PhoneSample
 rows (m/s^2, rad/s, uT) for the dead reckoning: ours (edge/pedestrian/estimator.py) or the paper's
@@ -10,6 +10,8 @@ Every pose says how many stand resets it includes in `correction_sequence`: the 
 poses and scans on different keys, so a pose can overtake its scan; the count on the pose itself
 tells the hub that the dead reckoning restarted, whatever order the two arrive in.
 Nothing is published before the first accepted scan: until then the phone has no position.
+Every pose names its floor: the last stand's, plus the changes the phone's barometer counted since
+(edge/pedestrian/floors.py); without a barometer, the last stand's.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from edge.base import EdgeSummary
+from edge.pedestrian import floors
 from edge.pedestrian.estimator import PdrEstimator, PdrSettings, PdrStep, PhoneSample
 from edge.pedestrian.magnetic import VenueField
 from protocol import messages
@@ -45,6 +48,8 @@ class PedestrianCounters:
     scans_refused: int = 0
     other_sensor_batches: int = 0  # batches of a sensor that is not this agent's phone
     before_first_scan: int = 0  # steps taken before any stand: not published
+    pressure_readings: int = 0
+    pressure_refused: int = 0  # outside 100-1200 hPa or not a number (a decoding fault): skipped
 
 
 class PedestrianEdge:
@@ -65,6 +70,9 @@ class PedestrianEdge:
         self.resets = 0
         self.last_pose: tuple[float, float, float] | None = None  # x m, y m, heading rad of the last step out
         self.counters = PedestrianCounters()
+        self.floor_settings = floors.FloorSettings()
+        self.floors = floors.FloorState()
+        self._warned_pressure = 0  # refused readings already warned about
 
     @property
     def samples(self) -> int:
@@ -93,8 +101,22 @@ class PedestrianEdge:
             return
         self.counters.scans_accepted += 1
         self.resets += 1
+        self.floors = floors.at_fix(self.floors, scan.timestamp_ns, scan.floor, self.floor_settings)
         self.estimator.reset_to_stand(scan.timestamp_ns, scan.x_m, scan.y_m, scan.heading_rad, scan.tilt_rad,
                                       scan.heading_sd_rad or None)
+
+    def pressure(self, reading: Any) -> None:
+        """One barometer reading of this phone (another phone's is its own edge's)."""
+        if reading.sensor_id and reading.sensor_id != self.sensor_id:
+            return
+        self.counters.pressure_readings += 1
+        try:
+            self.floors = floors.step(self.floors, reading.timestamp_ns, reading.pressure_hpa, self.floor_settings)
+        except ValueError:
+            self.counters.pressure_refused += 1
+            return
+        if hasattr(self.estimator, "on_stairs"):  # ours; the paper's method knows no stairs
+            self.estimator.on_stairs = floors.on_stairs(self.floors, self.floor_settings)
 
     def flush(self) -> list[Any]:
         return []
@@ -103,6 +125,11 @@ class PedestrianEdge:
         """The hub does not correct a phone's dead reckoning: a stand scan resets it."""
 
     def warnings(self) -> list[str]:
+        refused = self.counters.pressure_refused
+        if refused and refused >= 2 * self._warned_pressure:  # 1, 2, 4, 8, ...: rate-limited
+            self._warned_pressure = refused
+            return [f"{self.sensor_id}: {refused} of {self.counters.pressure_readings} pressure readings refused "
+                    f"(outside 100-1200 hPa or not a number); floors are counted from the others"]
         return []
 
     def summarise(self, summary: EdgeSummary) -> None:
@@ -114,7 +141,8 @@ class PedestrianEdge:
         return messages.new("EstimatedPose", timestamp_ns=step.time_ns, agent_id=self.agent_id, x_m=step.x_m,
                             y_m=step.y_m, heading_rad=step.heading_rad,
                             covariance=np.asarray(step.covariance, dtype=float).ravel().tolist(),
-                            method=self.method, track=messages.Track.LIVE, correction_sequence=self.resets)
+                            method=self.method, track=messages.Track.LIVE, correction_sequence=self.resets,
+                            floor=floors.current_floor(self.floors, self.floor_settings) or 0)
 
 
 AXES = {"+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0),

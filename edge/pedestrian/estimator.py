@@ -90,6 +90,7 @@ class PdrSettings:
     step_gain_min_m: float = 0.25  # bounds of a learned K: steps 0.35-1.0 m for typical amplitudes
     step_gain_max_m: float = 0.6
     step_gain_smoothing: float = 0.5  # weight of a newly learned K against the previous one
+    stair_tread_m: float = 0.28  # a step's horizontal length on a stair: building codes' going 0.25-0.30 m
     step_gain_min_sum: float = 10.0  # learn K only over this many Weinberg units (about 10 steps)
     step_gain_min_displacement_m: float = 10.0  # ... and stands this far apart (a 3 deg heading error is 5 %)
     step_length_sd_fraction: float = 0.08  # per-step length error (Weinberg: ~8 % of distance)
@@ -154,6 +155,7 @@ class PdrEstimator:
         self.turn_since_step_rad = 0.0
         self.last_heading_rad = 0.0
         self.gaps = self.backwards = 0
+        self.on_stairs = False  # set by the caller from the barometer (edge/pedestrian/floors.on_stairs)
 
     def device_heading_rad(self, rotation: np.ndarray | None = None) -> float:
         """Heading of the forward axis in Fusion's earth frame (counter-clockwise about up)."""
@@ -206,7 +208,8 @@ class PdrEstimator:
     def _advance(self, event: pdr_steps.StepEvent) -> PdrStep:
         settings = self.settings
         heading = self._step_direction_rad() + self.heading_offset_rad
-        length = self.step_gain_m * event.weinberg
+        # On a stair a step is one tread, whatever the bounce says (the body rises instead of striding)
+        length = settings.stair_tread_m if self.on_stairs else self.step_gain_m * event.weinberg
         self.weinberg_since_stand += event.weinberg
         cos_h, sin_h = math.cos(heading), math.sin(heading)
         self.x_m += length * cos_h

@@ -1,7 +1,7 @@
 """`mcap://FILE`: a session log replayed as an edge's source, paced by log time.
 
     for message in mcap_source(Path("game.mcap"), "chair01", speed=1.0, stop=stop):
-        ...  # ImuBatch, BeaconSighting, StandScan of chair01, as the devices sent them
+        ...  # ImuBatch, BeaconSighting, StandScan, Pressure of chair01, as the devices sent them
 
 The simulator's sessions and recordings replay through the same edge code as live devices. The
 session description comes from the log itself unless a venue file is given.
@@ -22,7 +22,7 @@ from protocol.session import Session
 from protocol.session_log import LogMessages, read_description, session_description
 from edge.sources.registry import CheckRequest, Finding, Level, OpenRequest, Scheme, check_agent
 
-STREAMS = ("ImuBatch", "BeaconSighting", "StandScan")  # what an edge takes from a log
+STREAMS = ("ImuBatch", "BeaconSighting", "StandScan", "Pressure")  # what an edge takes from a log
 LOG_FIX = "give a log written by reckon (sim, import, record or a hub's -o)"
 
 

@@ -230,6 +230,9 @@ class SwimEdge:
     def scan(self, scan: Any) -> None:
         """A pool has no stands to scan."""
 
+    def pressure(self, reading: Any) -> None:
+        """A pool has no floors to count."""
+
     def summarise(self, summary: EdgeSummary) -> None:
         summary.swimmer = True
         summary.samples, summary.lengths = self.samples, sum(self.indices.values())

@@ -83,6 +83,7 @@ class MapGuard:
         self.recoveries_seen = matcher.diagnostics.recoveries
         self.recent_recoveries: deque[int] = deque(maxlen=max(1, settings.max_recoveries + 1))
         self.steps = 0
+        self.last_pose: DeadReckonedPose | None = None
         # (time ns, fall-back pose or None) of the last poses, for refined poses that come out later
         self.recent: deque[tuple[int, MatchedPose | None]] = deque(maxlen=matcher.refined_lag_steps + 2)
 
@@ -109,6 +110,7 @@ class MapGuard:
 
     def update(self, pose: DeadReckonedPose) -> MatchedPose:
         settings = self.settings
+        self.last_pose = pose
         matched = self.matcher.update(pose)
         self.steps += 1
         diagnostics = self.matcher.diagnostics
@@ -143,6 +145,17 @@ class MapGuard:
         self.diagnostics.fallback_steps += 1
         self.recent.append((pose.time_ns, out))
         return out
+
+    def observe(self, x_m: float, y_m: float, sd_m: float, covariance_xy: np.ndarray) -> None:
+        """A position fix now: the filter weighs it (in the shadow while falling back), and the
+        fall-back track's offset moves towards it as a Kalman update with the track's covariance."""
+        self.matcher.observe(x_m, y_m, sd_m)
+        if self.fallback and self.last_pose is not None:
+            prior = np.asarray(covariance_xy, dtype=float)
+            gain = prior @ np.linalg.inv(prior + np.eye(2) * sd_m * sd_m)
+            here = np.array([self.last_pose.x_m + self.offset_xy_m[0], self.last_pose.y_m + self.offset_xy_m[1]])
+            shift = gain @ (np.array([x_m, y_m]) - here)
+            self.offset_xy_m = (self.offset_xy_m[0] + float(shift[0]), self.offset_xy_m[1] + float(shift[1]))
 
     def refined(self) -> list[MatchedPose]:
         return [self._refined(pose) for pose in self.matcher.refined()]

@@ -34,6 +34,8 @@ from hub.pedestrian.matching import DeadReckonedPose, MatchedPose, wrap_angle_ra
 from hub.pedestrian.walkable import WalkableArea
 
 
+OUTLIER_SHARE = 0.05  # of a fix's likelihood spread evenly: the chance that a gated fix is still wrong
+
 @dataclass(frozen=True)
 class ParticleSettings:
     particles: int = 300  # 200-500 is the usual range for floor-plan filters; 300 costs about 0.3 ms a step
@@ -79,6 +81,7 @@ class ParticleDiagnostics:
     out_of_order: int = 0  # poses not later than the previous one: ignored
     gaps: int = 0
     reseeds_near: int = 0  # clouds drawn near a given point by `seed_near` (the map guard's re-acquisition)
+    fixes: int = 0  # position fixes weighed in (`observe`)
     effective_particles: float = 0.0
 
 
@@ -197,6 +200,19 @@ class ParticleMatcher:
                    start_y_m + length_m * mean_scale * math.sin(moved_rad),
                    self.settings.recovery_position_sd_m, self.output_offset_rad,
                    self.settings.recovery_heading_sd_rad)
+
+    def observe(self, x_m: float, y_m: float, sd_m: float) -> None:
+        """A position fix now (a beacon pass, carried to now along the dead reckoning): the weights
+        times its likelihood, with OUTLIER_SHARE of it spread evenly (a wrong fix must not empty
+        the cloud), resampled when few particles carry the weight."""
+        distance2 = ((self.x_m - x_m) ** 2 + (self.y_m - y_m) ** 2) / (sd_m * sd_m)
+        weight = self.weight * (OUTLIER_SHARE + np.exp(-0.5 * distance2))
+        self.weight = weight / weight.sum()
+        self.diagnostics.fixes += 1
+        effective = 1.0 / float(np.sum(self.weight ** 2))
+        self.diagnostics.effective_particles = effective
+        if effective < self.settings.resample_below_fraction * self.settings.particles:
+            self._resample()
 
     def seed_near(self, x_m: float, y_m: float, position_sd_m: float, max_distance_m: float) -> bool:
         """Re-draw the cloud on walkable cells around (x, y), none further than `max_distance_m`:

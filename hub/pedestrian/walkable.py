@@ -179,10 +179,11 @@ class WalkableArea:
     @classmethod
     def from_venue(cls, venue: Venue, settings: WalkableSettings = WalkableSettings(), floor: int = 0
                    ) -> "WalkableArea":
-        """From the venue's floor plan when it has one, else from corridors between its map points
-        on `floor`; ValueError when it has neither."""
-        if venue.floor_plan:
-            return cls.from_floor_plan(venue.floor_plan, settings)
+        """From the plan of `floor` when the venue has one (`Venue.plan_of`), else from corridors
+        between its map points on `floor`; ValueError when it has neither."""
+        plan = venue.plan_of(floor)
+        if plan:
+            return cls.from_floor_plan(plan, settings)
         else:
             points = tuple(p for p in venue.map_points if p.floor == floor)
             corridors, _ = corridor_graph(points, settings.lateral_tolerance_m)

@@ -48,7 +48,8 @@ def run_sim_pedestrian(args: argparse.Namespace, progress: Callable[[str], None]
     params = params_with_overrides(overrides(args.set))
     summary = simulate_pedestrian(Path(args.output), seed=args.seed, people=args.people, preset=args.preset,
                                   mount=args.mount, params=params, duration_s=args.duration,
-                                  progress=lambda fraction: progress(f"simulating: {100 * fraction:.0f} %"))
+                                  progress=lambda fraction: progress(f"simulating: {100 * fraction:.0f} %"),
+                                  beacons=args.beacons, barometer=args.barometer)
     print(summary)
     return 0
 
@@ -88,9 +89,14 @@ def register(sub: Any) -> None:
     walk = sim_kind.add_parser("pedestrian", help="people walking a building with a phone in the hand or a pocket, "
                                                   "calibration stands with QR codes (docs/simulator-pedestrian.md)")
     walk.add_argument("--people", type=int, default=3, help="walkers (the paper: 3, statures 169/174/179 cm)")
-    walk.add_argument("--preset", choices=["paper", "floorplan"], default="paper",
+    walk.add_argument("--preset", choices=["paper", "floorplan", "floors"], default="paper",
                       help="paper: the paper's 12-point corridor map and route; floorplan: an office floor with "
-                           "rooms and a hall")
+                           "rooms and a hall; floors: that office on two floors with a staircase, a barometer and "
+                           "BLE beacons")
+    walk.add_argument("--beacons", type=int, default=None, metavar="N",
+                      help="BLE beacons per floor (default: 6 on preset floors, none elsewhere)")
+    walk.add_argument("--barometer", action=argparse.BooleanOptionalAction, default=None,
+                      help="phone barometers (default: on for preset floors only)")
     walk.add_argument("--mount", choices=["hand", "pocket", "both"], default="hand",
                       help="where each walker carries a phone (both: two phones)")
     walk.add_argument("--duration", type=float, default=None, help="seconds per walker (default: the whole route)")

@@ -19,10 +19,15 @@ there is interpolated between the track's poses (the stand pose starts each trac
 waypoints of every session given: median, p75 and p90 of the position error in metres. Where the
 session says where the true turns were (`source.turns`, the simulator), the heading error
 TURN_SETTLE_S after each turn, and for the paper's snap whether it snapped to the right point.
+Where the truth names floors (a building of several), each pose's floor (the edge's, from the last
+stand and the barometer: edge/pedestrian/floors.py) is scored too: the share of waypoints on the
+right floor, and the IPIN competitions' score, p75 of the horizontal error plus FLOOR_PENALTY_M
+for each floor wrong.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,7 +38,7 @@ import numpy as np
 from edge.pedestrian.edge import PedestrianEdge
 from hub.pedestrian.matching import SnapStage
 from hub.pedestrian.paper import PaperSnapMatcher
-from hub.pedestrian.hub import PedestrianHub, particle_matcher_factory
+from hub.pedestrian.hub import PedestrianHub, our_matcher_factory
 from hub.pedestrian.walkable import WalkableArea
 from protocol import messages
 from protocol.errors import InputError
@@ -42,7 +47,8 @@ from protocol.session_log import LogMessages, SessionData
 
 TURN_SETTLE_S = 2.0  # heading scored this long after a true turn: the turn has ended, the snap is done
 SNAP_MATCH_S = 3.0  # a snap counts for a true junction passage within this much time of it
-INPUT_TYPES = ("ImuBatch", "StandScan")
+INPUT_TYPES = ("ImuBatch", "StandScan", "Pressure", "BeaconSighting")
+FLOOR_PENALTY_M = 15.0  # the IPIN competitions' score: p75 of (horizontal error + 15 m per floor wrong)
 
 
 def is_pedestrian_session(data: SessionData) -> bool:
@@ -55,18 +61,26 @@ def is_pedestrian_session(data: SessionData) -> bool:
 
 @dataclass
 class Track:
-    """One agent's output poses in time order (time ns, x m, y m, heading rad)."""
+    """One agent's output poses in time order (time ns, x m, y m, heading rad, floor)."""
 
-    rows: list[tuple[int, float, float, float]] = field(default_factory=list)
+    rows: list[tuple[int, float, float, float, int]] = field(default_factory=list)
 
-    def add(self, time_ns: int, x_m: float, y_m: float, heading_rad: float) -> None:
+    def add(self, time_ns: int, x_m: float, y_m: float, heading_rad: float, floor: int = 0) -> None:
         if self.rows and time_ns <= self.rows[-1][0]:
-            self.rows[-1] = (time_ns, x_m, y_m, heading_rad)  # a reset at a step's time replaces it
+            self.rows[-1] = (time_ns, x_m, y_m, heading_rad, floor)  # a reset at a step's time replaces it
         else:
-            self.rows.append((time_ns, x_m, y_m, heading_rad))
+            self.rows.append((time_ns, x_m, y_m, heading_rad, floor))
+
+    def floor_at(self, time_ns: np.ndarray) -> np.ndarray:
+        """The floor of the last pose at or before each time (the first pose's before it)."""
+        if not self.rows:
+            return np.zeros(len(time_ns), dtype=np.int64)
+        times = np.array([row[0] for row in self.rows], dtype=np.int64)
+        floors = np.array([row[4] for row in self.rows], dtype=np.int64)
+        return floors[np.clip(np.searchsorted(times, time_ns, side="right") - 1, 0, len(floors) - 1)]
 
     def at(self, time_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        rows = np.array(self.rows, dtype=float).reshape(-1, 4)
+        rows = np.array([row[:4] for row in self.rows], dtype=float).reshape(-1, 4)
         if not len(rows):
             nan = np.full(len(time_ns), math.nan)
             return nan, nan, nan
@@ -74,6 +88,18 @@ class Track:
         y = np.interp(time_ns, rows[:, 0], rows[:, 2])
         nearest = np.clip(np.searchsorted(rows[:, 0], time_ns, side="right") - 1, 0, len(rows) - 1)
         return x, y, rows[nearest, 3]
+
+
+@dataclass
+class BeaconFixCount:
+    """Beacon passes judged by our hub's gate (hub/pedestrian/hub.py)."""
+
+    taken: int = 0
+    refused: int = 0
+    elsewhere: int = 0  # another floor's beacon, or no pose near the pass
+
+    def __add__(self, other: "BeaconFixCount") -> "BeaconFixCount":
+        return BeaconFixCount(self.taken + other.taken, self.refused + other.refused, self.elsewhere + other.elsewhere)
 
 
 @dataclass
@@ -89,6 +115,7 @@ class PhoneRun:
     snaps: list[Any] = field(default_factory=list)  # the paper's SnapRecords
     live_poses: int = 0  # the hub's pose/live
     fallback_poses: int = 0  # ... of which the edge's own track (map_fallback)
+    fixes: BeaconFixCount = field(default_factory=BeaconFixCount)
 
 
 @dataclass
@@ -101,6 +128,8 @@ class WaypointErrors:
     session: str
     errors_m: np.ndarray
     heading_errors_deg: np.ndarray
+    floor_errors: np.ndarray = field(default_factory=lambda: np.array([], dtype=np.int64))  # |floor - true| per waypoint
+    floors_in_truth: bool = False  # the truth names floors (a building of several)
     snaps_correct: int | None = None
     snaps_total: int | None = None  # true turns
     snaps_wrong: int | None = None  # applied position snaps matching no true turn
@@ -123,6 +152,7 @@ class PedestrianReport:
     rows: list[WaypointErrors] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
     walkable: list[WalkableTruth] = field(default_factory=list)  # sessions with a map
+    beacon_fixes: BeaconFixCount = field(default_factory=BeaconFixCount)
 
 
 def phones(session: Session) -> list[tuple[Any, Any]]:
@@ -131,42 +161,57 @@ def phones(session: Session) -> list[tuple[Any, Any]]:
             if sensor.mount in (Mount.HAND, Mount.POCKET)]
 
 
-def run_method(session: Session, inputs: list[Any], method: str, area: WalkableArea | None = None
-               ) -> list[PhoneRun]:
+def run_method(session: Session, inputs: list[Any], method: str, area: WalkableArea | None = None,
+               beacons: bool = False) -> list[PhoneRun]:
     """Push the session's phone batches and stand scans through one edge per phone and its hub
     (a hub per phone: the hub keys its matchers by agent, and one agent may carry two phones).
-    `area`: the venue's walkable area when already built."""
+    `area`: the venue's walkable area when already built. `beacons`: our hub takes the phones'
+    beacon sightings as fixes (the paper's method has none)."""
     if method == "paper":
         from edge.pedestrian.paper import PaperPdr
 
         points = session.venue.map_points
-        factory = (lambda agent_id: PaperSnapMatcher(points)) if points else None  # noqa: E731
+        def paper_matcher(agent_id: str, floor: int) -> PaperSnapMatcher | None:
+            on_floor = tuple(p for p in points if p.floor == floor)
+            return PaperSnapMatcher(on_floor) if on_floor else None
+
+        factory = paper_matcher if points else None
     else:
-        factory = particle_matcher_factory(session.venue, area)
+        factory = our_matcher_factory(session.venue, area, beacons=beacons)
     runs: dict[str, tuple[PhoneRun, PedestrianEdge, PedestrianHub | None]] = {}
     for agent, sensor in phones(session):
         estimator = PaperPdr(height_m=agent.height_m) if method == "paper" else None
         edge = PedestrianEdge(agent, session.venue, estimator, method=method, sensor_id=sensor.id)
-        hub = PedestrianHub(session, factory, method=method) if factory is not None else None
+        hub = PedestrianHub(session, factory, method=method, beacons=beacons) if factory is not None else None
         runs[sensor.id] = (PhoneRun(agent.id, sensor.id, sensor.mount.value, hub=Track() if hub else None,
                                     refined=Track() if hub else None), edge, hub)
     for message in inputs:
         if message.sensor_id not in runs:
             continue
         run, edge, hub = runs[message.sensor_id]
-        if messages.type_name(message) == "StandScan":
+        name = messages.type_name(message)
+        if name == "StandScan":
             edge.scan(message)
             if message.accepted:
-                run.edge.add(message.timestamp_ns, message.x_m, message.y_m, message.heading_rad)
+                run.edge.add(message.timestamp_ns, message.x_m, message.y_m, message.heading_rad, message.floor)
+            continue
+        if name == "Pressure":
+            edge.pressure(message)
+            continue
+        if name == "BeaconSighting":
+            if hub is not None:
+                _take(run, hub.on_message(message))
             continue
         for pose in edge.push(message):
-            run.edge.add(pose.timestamp_ns, pose.x_m, pose.y_m, pose.heading_rad)
+            run.edge.add(pose.timestamp_ns, pose.x_m, pose.y_m, pose.heading_rad, pose.floor)
             if hub is not None:
                 _take(run, hub.on_message(pose))
     for run, _, hub in runs.values():
         if hub is not None:
             _take(run, hub.flush())
-            run.snaps = list(hub.agents[run.agent_id].snaps)
+            view = hub.agents[run.agent_id]
+            run.snaps = list(view.snaps)
+            run.fixes = BeaconFixCount(view.fixes_taken, view.fixes_refused, view.fixes_elsewhere)
             if run.refined is not None and not run.refined.rows:
                 run.refined = None  # this matcher has no refined track
     return [run for run, _, _ in runs.values()]
@@ -179,7 +224,7 @@ def _take(run: PhoneRun, outputs: list[Any]) -> None:
             run.live_poses += 1
             run.fallback_poses += bool(out.map_fallback)
         if track is not None:
-            track.add(out.timestamp_ns, out.x_m, out.y_m, out.heading_rad)
+            track.add(out.timestamp_ns, out.x_m, out.y_m, out.heading_rad, out.floor)
 
 
 def read_inputs(path: Path) -> list[Any]:
@@ -197,16 +242,21 @@ def evaluate_pedestrians(sessions: list[tuple[SessionData, Path]],
             raise InputError(f"{path}: no truth poses for {', '.join(missing)}; `reckon eval` scores against truth")
         inputs = read_inputs(path)
         venue = data.session.venue
-        area = WalkableArea.from_venue(venue) if venue.floor_plan or venue.map_points else None
+        area = WalkableArea.from_venue(venue) if venue.floor_plan or venue.floor_plans or venue.map_points else None
         if area is not None:
             report.walkable.append(walkable_truth(data, path, area))
-        for method in ("paper", "reckon"):
-            progress(f"{path.name}: {method}")
-            runs = run_method(data.session, inputs, method, area)
+        heard = venue.beacons and any(messages.type_name(m) == "BeaconSighting" for m in inputs)
+        for method, beacons in (("paper", False), ("reckon", False)) + ((("reckon", True),) if heard else ()):
+            progress(f"{path.name}: {method}{' with beacons' if beacons else ''}")
+            runs = run_method(data.session, inputs, method, area, beacons)
+            report.beacon_fixes += sum((run.fixes for run in runs), start=BeaconFixCount()) if beacons else BeaconFixCount()
             for mount in sorted({run.mount for run in runs}):
                 chosen = [run for run in runs if run.mount == mount]
-                report.rows.append(score(data, path, method, mount, chosen, "edge", "none"))
-                matcher = "turn snap" if method == "paper" else "particle filter"
+                if not beacons:  # the edge's track is the same with or without them
+                    report.rows.append(score(data, path, method, mount, chosen, "edge", "none"))
+                matcher = ("turn snap" if method == "paper" else
+                           ("particle filter" if area is not None else "") + (" + beacons" if beacons else ""))
+                matcher = matcher.strip(" +") if matcher != " + beacons" else "beacons"
                 for track in ("live", "refined"):
                     if all(getattr(run, "hub" if track == "live" else "refined") is not None for run in chosen):
                         report.rows.append(score(data, path, method, mount, chosen, track, matcher))
@@ -220,10 +270,19 @@ def evaluate_pedestrians(sessions: list[tuple[SessionData, Path]],
 
 
 def walkable_truth(data: SessionData, path: Path, area: WalkableArea) -> WalkableTruth:
-    """Every truth position of the session against `area`."""
+    """Every truth position of the session against the walkable area of its floor (`area`: floor 0's)."""
     x_m = np.concatenate([truth.x_m for truth in data.truth.values()])
     y_m = np.concatenate([truth.y_m for truth in data.truth.values()])
-    distances_m = area.outside_by_m(x_m, y_m) if len(x_m) else np.array([])
+    floors = np.concatenate([truth.floor if truth.floor is not None else np.zeros(len(truth.x_m), dtype=np.int64)
+                             for truth in data.truth.values()])
+    distances_m = np.zeros(len(x_m))
+    for floor in np.unique(floors).tolist():
+        on = floors == floor
+        try:
+            here = area if floor == 0 else WalkableArea.from_venue(data.session.venue, floor=int(floor))
+        except ValueError:  # no map on that floor: nothing to check there
+            continue
+        distances_m[on] = here.outside_by_m(x_m[on], y_m[on])
     return WalkableTruth(path.name, len(x_m), tuple(float(d) for d in distances_m if d > 0.0))
 
 
@@ -232,7 +291,7 @@ def score(data: SessionData, path: Path, method: str, mount: str, runs: list[Pho
     """Waypoint errors (and heading after turns, snaps) of these phones' tracks: "edge" (no map
     matching), or the hub's "live" or "refined"."""
     map_matching = track_name != "edge"
-    errors, heading_errors = [], []
+    errors, heading_errors, floor_errors = [], [], []
     turns = data.session.source.get("turns", []) if isinstance(data.session.source, dict) else []
     for run in runs:
         track = {"edge": run.edge, "live": run.hub, "refined": run.refined}[track_name] or run.edge
@@ -243,6 +302,8 @@ def score(data: SessionData, path: Path, method: str, mount: str, runs: list[Pho
         after = truth.time_ns > scans[0].timestamp_ns
         x, y, _ = track.at(truth.time_ns[after])
         errors.append(np.hypot(x - truth.x_m[after], y - truth.y_m[after]))
+        true_floor = truth.floor[after] if truth.floor is not None else np.zeros(int(after.sum()), dtype=np.int64)
+        floor_errors.append(np.abs(track.floor_at(truth.time_ns[after]) - true_floor))
         agent_turns = [t for t in turns if t.get("agent_id", run.agent_id) == run.agent_id]
         if agent_turns and np.all(np.isfinite(truth.heading_rad)) and track_name != "refined":  # it keeps live's
             times = np.array([int(t["time_ns"]) for t in agent_turns]) + int(TURN_SETTLE_S * 1e9)
@@ -254,7 +315,9 @@ def score(data: SessionData, path: Path, method: str, mount: str, runs: list[Pho
     row = WaypointErrors(method, map_matching, matcher, "live" if track_name == "edge" else track_name, mount,
                          path.name,
                          np.concatenate(errors) if errors else np.array([]),
-                         np.concatenate(heading_errors) if heading_errors else np.array([]))
+                         np.concatenate(heading_errors) if heading_errors else np.array([]),
+                         np.concatenate(floor_errors) if floor_errors else np.array([], dtype=np.int64),
+                         any(truth.floor is not None for truth in data.truth.values()))
     if track_name == "live" and method == "paper" and turns:
         row.snaps_correct, row.snaps_total, row.snaps_wrong = _snap_score(
             [t for t in turns if any(t.get("agent_id", r.agent_id) == r.agent_id for r in runs)],
@@ -305,6 +368,16 @@ def _percentiles(values: np.ndarray) -> dict[str, float | None]:
     return {"median": round(float(median), 3), "p75": round(float(p75), 3), "p90": round(float(p90), 3)}
 
 
+def floor_score(rows: list[WaypointErrors]) -> dict[str, Any]:
+    """Waypoints on the right floor, and the IPIN score: p75 of error + FLOOR_PENALTY_M x floors wrong."""
+    errors = np.concatenate([r.errors_m for r in rows])
+    wrong = np.concatenate([r.floor_errors for r in rows])
+    if not len(errors):
+        return {"right_floor": None, "ipin_score_m": None}
+    return {"right_floor": round(float(np.mean(wrong == 0)), 4),
+            "ipin_score_m": round(float(np.percentile(errors + FLOOR_PENALTY_M * wrong, 75)), 3)}
+
+
 def _snaps(rows: list[WaypointErrors]) -> dict[str, int] | None:
     if any(r.snaps_total is None for r in rows):
         return None
@@ -323,8 +396,10 @@ def to_json(report: PedestrianReport) -> dict[str, Any]:
                         "map_fallback": ({"poses": sum(r.fallback_poses for r in rows),
                                           "of_live_poses": sum(r.live_poses for r in rows)}
                                          if map_matching and track == "live" else None),
+                        "floors": floor_score(rows),
                         "per_session_p75_m": {r.session: _percentiles(r.errors_m)["p75"] for r in rows}})
     return {"sessions": report.sessions, "results": results, "problems": report.problems,
+            "beacon_fixes": dataclasses.asdict(report.beacon_fixes),
             "walkable_truth": [{"session": w.session, "positions": w.positions, "outside": len(w.outside_m),
                                 "farthest_outside_m": round(max(w.outside_m), 3) if w.outside_m else None}
                                for w in report.walkable]}
@@ -334,7 +409,7 @@ def to_table(report: PedestrianReport) -> str:
     fmt = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
     lines = [f"{len(report.sessions)} pedestrian session(s): position error at the truth waypoints after the "
              "first stand (m)",
-             f"{'method':8} {'phone':7} {'map matching':25} {'waypoints':>9} {'median':>7} {'p75':>7} {'p90':>7} "
+             f"{'method':8} {'phone':7} {'map matching':36} {'waypoints':>9} {'median':>7} {'p75':>7} {'p90':>7} "
              f"{'heading after turns p90 deg':>28} {'turn snaps':>18}"]
     for (method, map_matching, matcher, track, mount), errors, headings, rows in pooled(report):
         p = _percentiles(errors)
@@ -342,7 +417,7 @@ def to_table(report: PedestrianReport) -> str:
         h = _percentiles(headings)["p90"] if len(headings) else None
         snaps = _snaps(rows)
         snap_text = "-" if snaps is None else f"{snaps['correct']}/{snaps['true_turns']}, {snaps['wrong']} wrong"
-        lines.append(f"{method:8} {mount:7} {(matcher if map_matching else 'none'):25} {len(errors):9d} {fmt(p['median']):>7} "
+        lines.append(f"{method:8} {mount:7} {(matcher if map_matching else 'none'):36} {len(errors):9d} {fmt(p['median']):>7} "
                      f"{fmt(p['p75']):>7} {fmt(p['p90']):>7} {fmt(h):>28} {snap_text:>18}")
     if len(report.sessions) > 1:
         lines += ["", "p75 per session (m): " + ", ".join(
@@ -359,6 +434,15 @@ def to_table(report: PedestrianReport) -> str:
         lines.append(f"map guard: {method}+{matcher} ({mount}): {sum(r.fallback_poses for r in rows)} of "
                      f"{sum(r.live_poses for r in rows)} live poses on the edge's track (the map contradicted it), "
                      f"in {sum(1 for r in rows if r.fallback_poses)} of {len(rows)} sessions")
+    if any(r.floors_in_truth for r in report.rows):
+        lines.append(f"floors (IPIN score: p75 of the error + {FLOOR_PENALTY_M:.0f} m per floor wrong): " + "; ".join(
+            f"{key[0]}{'+' + key[2] if key[1] else ''}{' refined' if key[3] == 'refined' else ''} ({key[4]}) "
+            f"{fmt(score['ipin_score_m'])} m, right floor {100 * (score['right_floor'] or 0):.1f} %"
+            for key, _, _, rows in pooled(report) for score in [floor_score(rows)]))
+    fixes = report.beacon_fixes
+    if fixes.taken or fixes.refused or fixes.elsewhere:
+        lines.append(f"beacon passes (ours): {fixes.taken} fixes taken, {fixes.refused} refused by the gate, "
+                     f"{fixes.elsewhere} on another floor or off the track")
     if report.walkable:
         lines.append(walkable_line(report.walkable))
     lines += [f"note: {problem}" for problem in report.problems]

@@ -21,7 +21,7 @@ where the origin lies in the frame.
 Beacons (`--beacons`, CSV `id,lat,lon,floor`): `id` an identity `ibeacon:<uuid>:<major>:<minor>` or
 `eddystone:<namespace>:<instance>`, or `eddystone:<instance>` (the log names an Eddystone by its
 instance alone). They become the venue's beacons `beacon-1`, `beacon-2`, ... in the file's order
-(their floors in `source.beacon_floors`). A sighting of one is a BeaconSighting with that venue
+(each with its floor). A sighting of one is a BeaconSighting with that venue
 id as `beacon_id`, as the live edge writes them (edge/sources/ble.py; the hub matches by id); a
 sighting of a beacon not in the file keeps its identity (`eddystone:<instance>` for an Eddystone)
 and is counted per identity in the report. A bad beacons file is an InputError naming file:line.
@@ -336,7 +336,8 @@ def session_description(name: str, log: GetSensorDataLog, frame: Frame, points: 
     """The session (a plain dict, validated by session_from_dict), as ILC's walk_session."""
     beacon_x, beacon_y = frame.xy(np.array([b.latitude_deg for b in beacon_rows]),
                                   np.array([b.longitude_deg for b in beacon_rows]))
-    beacons = [{"id": f"beacon-{number}", "x_m": float(x_m), "y_m": float(y_m), "identity": row.identity}
+    beacons = [{"id": f"beacon-{number}", "x_m": float(x_m), "y_m": float(y_m), "identity": row.identity,
+                "floor": row.floor}
                for number, (row, x_m, y_m) in enumerate(zip(beacon_rows, beacon_x, beacon_y), start=1)]
     return {
         "venue": {"name": name, "court_length_m": frame.length_m, "court_width_m": frame.width_m, "beacons": beacons,
@@ -347,8 +348,7 @@ def session_description(name: str, log: GetSensorDataLog, frame: Frame, points: 
         "source": {"importer": "getsensordata", "log": name, "phone": log.phone, "start": START_NOTE,
                    "height": "the walker's height is not recorded: the default 1.70 m is used",
                    "frame": frame.describe(), "origin_lat_deg": frame.latitude_deg,
-                   "origin_lon_deg": frame.longitude_deg, "time": TIME_NOTE, "truth_floors": [p.floor for p in points],
-                   "beacon_floors": {f"beacon-{n}": row.floor for n, row in enumerate(beacon_rows, start=1)}},
+                   "origin_lon_deg": frame.longitude_deg, "time": TIME_NOTE, "truth_floors": [p.floor for p in points]},
     }
 
 
@@ -390,7 +390,9 @@ def import_getsensordata(path: Path | str, output: Path | str, beacons_csv: Path
                                                     log_date_ns(log, path, report)), where=f"{path} (import)")
     count = sensor_count(AGENT_ID, phone.imu)
     report.sensors[SENSOR_ID] = count
-    truth = [truth_message(name, AGENT_ID, int(t), float(x), float(y), math.nan) for t, x, y in zip(times_ns, x_m, y_m)]
+    # a floor_ID that is not an integer floor scores as floor 0 (the stand's check above warns of POSI 1's)
+    truth = [truth_message(name, AGENT_ID, int(t), float(x), float(y), math.nan, floor_number(p.floor) or 0)
+             for t, x, y, p in zip(times_ns, x_m, y_m, points)]
     heading_rad = math.atan2(y_m[1] - y_m[0], x_m[1] - x_m[0])
     sightings, unknown = sighting_messages(name, log, beacon_rows)
     pressures = [pressure_message(name, int(t), float(p)) for t, p in zip(phone.pressure_ns, phone.pressure_hpa)]

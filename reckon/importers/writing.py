@@ -63,9 +63,10 @@ def sighting_message(venue: str, agent_id: str, sensor_id: str, beacon_id: str, 
     return time_ns, keys.beacon(venue, agent_id, sensor_id), message
 
 
-def truth_message(venue: str, agent_id: str, time_ns: int, x_m: float, y_m: float, heading_rad: float) -> Stamped:
+def truth_message(venue: str, agent_id: str, time_ns: int, x_m: float, y_m: float, heading_rad: float,
+                  floor: int = 0) -> Stamped:
     message = messages.new("TruthPose", timestamp_ns=time_ns, agent_id=agent_id, x_m=x_m, y_m=y_m,
-                           heading_rad=heading_rad)
+                           heading_rad=heading_rad, floor=floor)
     return time_ns, keys.truth(venue, agent_id), message
 
 

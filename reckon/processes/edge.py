@@ -94,6 +94,9 @@ def run_edge(config: BusConfig, session: Session, agent_id: str, source: Iterabl
             elif message.DESCRIPTOR.name == "StandScan":
                 publisher.publish(keys.scan(venue, agent_id), message)  # refused ones too, with their reason
                 edge.scan(message)
+            elif message.DESCRIPTOR.name == "Pressure":
+                publisher.publish(keys.pressure(venue, agent_id, message.sensor_id), message)
+                edge.pressure(message)
             else:
                 publisher.publish(keys.beacon(venue, agent_id, message.sensor_id), message)
             if progress and summary.messages_in % 1000 == 0:

@@ -47,7 +47,7 @@ STATIC_DIR = Path(__file__).resolve().parent / "static"
 TICK_S = 0.1  # 10 Hz: smooth to the eye, a few kB per tick per browser
 HANDOVER = 16384  # messages held between the hub thread and the view (a second of 300 agents at 50 Hz)
 RING = 4096  # samples each of the view's own Zenoh subscribers holds between ticks
-SKIPPED_STREAMS = ("ImuBatch", "CameraFrame", "ImpactEvent", "BeaconSighting")  # only their arrival is shown
+SKIPPED_STREAMS = ("ImuBatch", "CameraFrame", "ImpactEvent", "BeaconSighting", "Pressure")  # only their arrival is shown
 
 
 def parse_view_address(text: str) -> tuple[str, int]:

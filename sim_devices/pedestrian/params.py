@@ -212,6 +212,89 @@ class MagneticParams:
 
 
 @dataclass(frozen=True)
+class FloorParams:
+    """The two-floor building (preset `floors`): storey height and the staircase between floors 0 and 1."""
+
+    height_m: float = _p(4.0, "m", 2.5, 6.0, "floor-to-floor height (slab top to slab top); offices 3.5-4.5 m "
+                         "(a 2.7-3 m ceiling plus the slab and services void); assumption")
+    stair_up_vertical_mps: float = _p(0.3, "m/s", 0.1, 1.0, "vertical speed climbing the stair (one riser per "
+                                      "step at 1.7-1.9 steps/s, risers 0.16-0.18 m: 0.27-0.34 m/s); horizontal "
+                                      "speed = this x tread / riser, 0.5 m/s, inside Fruin's (1971) ascending "
+                                      "0.45-0.7 m/s")
+    stair_down_vertical_mps: float = _p(0.35, "m/s", 0.1, 1.0, "vertical speed descending (Fruin 1971: "
+                                        "descending 0.6-0.8 m/s horizontal, a little faster than ascending); "
+                                        "horizontal 0.59 m/s")
+    stair_tread_m: float = _p(0.28, "m", 0.2, 0.4, "going of one step (tread depth): building codes 0.25-0.30 m "
+                              "(e.g. UK Approved Document K: 0.28 m for public stairs); a step on the stair is one "
+                              "tread, so the step rate there is horizontal speed / tread")
+
+
+@dataclass(frozen=True)
+class BarometerParams:
+    """The phone's barometer (Bosch BMP280 / BMP388 / BMP390 class) and the air it measures."""
+
+    rate_hz: float = _p(10.0, "Hz", 1.0, 50.0, "Pressure samples per second; Android phones deliver about 5-25 Hz "
+                        "(SENSOR_DELAY_NORMAL ~5 Hz, faster on request); assumption 10")
+    noise_hpa: float = _p(0.015, "hPa", 0.0, 1.0, "RMS noise per sample after the sensor's filtering: BMP280 1.3 Pa "
+                          "at ultra-high resolution, BMP388/390 lower with the IIR filter; 0.01-0.02 hPa (about "
+                          "0.1-0.2 m)")
+    offset_hpa: float = _p(0.5, "hPa", 0.0, 5.0, "SD of a phone's constant offset: absolute accuracy +-1 hPa "
+                           "(BMP280, 0-65 deg C; BMP388 +-0.5); relative accuracy +-0.06-0.12 hPa is then the "
+                           "error of a pressure difference; assumption 0.3-1")
+    ground_hpa: float = _p(1008.0, "hPa", 850.0, 1100.0, "true pressure at floor 0's level at the session start "
+                           "(a low-lying site on a normal day); assumption")
+    air_temperature_c: float = _p(22.0, "deg C", -20.0, 45.0, "indoor air temperature in the hypsometric relation "
+                                  "p(z) = p0 exp(-g M z / (R T)): 0.117 hPa per metre at 1008 hPa and 22 deg C "
+                                  "(about 0.12 hPa/m near sea level)")
+    weather_trend_hpa_per_h: float = _p(0.2, "hPa/h", 0.0, 3.0, "SD of the session's linear weather trend, drawn "
+                                        "once per session (every phone sees it): synoptic changes typically 0.1-0.3 "
+                                        "hPa/h, up to about 1 hPa/h with a front or storm")
+    hvac_jump_hpa: float = _p(0.05, "hPa", 0.0, 1.0, "SD of a building pressure jump (ventilation switching, doors "
+                              "opening against the building's over-pressure); assumption 0.02-0.1 hPa")
+    hvac_jumps_per_min: float = _p(0.5, "1/min", 0.0, 10.0, "rate of such jumps (Poisson, building-wide); "
+                                   "assumption")
+    hvac_rise_s: float = _p(2.0, "s", 0.1, 60.0, "time a jump takes (smoothstep); assumption 1-5 s")
+
+
+@dataclass(frozen=True)
+class BleParams:
+    """BLE beacons and the phone's scanning: log-distance path loss with shadowing, body and floor losses."""
+
+    advertising_interval_ms: float = _p(100.0, "ms", 20.0, 10240.0, "beacon advertising interval (iBeacon "
+                                        "recommends 100 ms); each event is delayed a further 0-10 ms (the BLE "
+                                        "spec's advDelay)")
+    reception_chance: float = _p(0.2, "1", 0.01, 1.0, "share of advertisements reported by an Android scan "
+                                 "(one of three channels heard at a time, scan window/interval, collisions): a "
+                                 "100 ms beacon in range is heard about 2 times per second, with misses; "
+                                 "Android reports of 1-5 per second (field notes); assumption 0.1-0.5")
+    height_m: float = _p(2.6, "m", 0.3, 5.0, "beacon height above its floor (ceiling or high on a wall); "
+                         "assumption")
+    tx_power_error_db: float = _p(6.0, "dB", 0.0, 15.0, "each beacon's true RSSI at 1 m is the venue file's "
+                                  "nominal -59 dBm plus a draw in [-this, +this] (uncalibrated beacons, mounting, "
+                                  "battery); the brief's +-6 dB; the venue file keeps the nominal figure")
+    path_loss_exponent_min: float = _p(1.8, "1", 1.0, 6.0, "path-loss exponent drawn once per venue in [min, max]; "
+                                       "1.8-4.3 within one building (algorithms.md: BLE proximity)")
+    path_loss_exponent_max: float = _p(4.3, "1", 1.0, 6.0, "see path_loss_exponent_min")
+    shadowing_db: float = _p(6.0, "dB", 0.0, 15.0, "SD of log-normal shadowing (walls, furniture, the building), "
+                             "a field over the phone's position per beacon and floor; indoor 4-8 dB")
+    shadowing_distance_m: float = _p(3.0, "m", 0.2, 30.0, "correlation distance of the shadowing (Gaussian "
+                                     "correlation exp(-d^2 / 2 L^2)); indoor decorrelation 1-5 m (Gudmundson-type "
+                                     "models); assumption")
+    fading_db: float = _p(3.0, "dB", 0.0, 15.0, "SD of the per-packet variation (multipath fading, the three "
+                          "advertising channels differ by a few dB); assumption 2-5")
+    body_loss_db: float = _p(6.0, "dB", 0.0, 20.0, "extra loss with the walker's body between phone and beacon "
+                             "(scaled by how squarely it lies between); 3-5 dB (algorithms.md), 3-10 dB "
+                             "measured at 2.4 GHz behind a torso")
+    floor_loss_db: float = _p(20.0, "dB", 0.0, 50.0, "attenuation per floor slab between phone and beacon; ITU-R "
+                              "P.1238 gives 15 dB for one floor at 1.8-2 GHz in offices, reinforced-concrete slabs "
+                              "at 2.4 GHz 15-25 dB; the stairwell's opening is not modelled")
+    phone_offset_db: float = _p(3.0, "dB", 0.0, 15.0, "SD of a phone's RSSI offset (Android devices differ by up "
+                                "to about 10 dB for the same signal); assumption 2-5")
+    sensitivity_dbm: float = _p(-100.0, "dBm", -120.0, -60.0, "weakest advertisement the phone reports (BLE 1M "
+                                "receivers -95 to -100 dBm); RSSI is reported in whole dBm")
+
+
+@dataclass(frozen=True)
 class ClockParams:
     """Where the session sits in time."""
 
@@ -230,6 +313,9 @@ class PedestrianParams:
     stand: StandParams = field(default_factory=StandParams)
     sensors: SensorParams = field(default_factory=SensorParams)
     magnetic: MagneticParams = field(default_factory=MagneticParams)
+    floors: FloorParams = field(default_factory=FloorParams)
+    barometer: BarometerParams = field(default_factory=BarometerParams)
+    ble: BleParams = field(default_factory=BleParams)
     clock: ClockParams = field(default_factory=ClockParams)
 
 
@@ -238,12 +324,16 @@ _ERROR_FIELDS: dict[str, tuple[str, ...]] = {
                 "gyro_noise_dps_per_sqrt_hz", "gyro_bias_dps", "gyro_bias_walk_dps_per_sqrt_s", "gyro_scale_error",
                 "misalignment_deg", "mag_noise_ut", "mag_bias_ut", "mag_scale_error"),
     "stand": ("placement_deg",),
+    "barometer": ("noise_hpa", "offset_hpa"),
+    "ble": ("phone_offset_db",),
 }
 
 
 def error_free(params: PedestrianParams | None = None) -> PedestrianParams:
     """`params` (default PedestrianParams()) with every sensor error and the stand placement error zero.
-    The motion, the hold, the magnetic field and the ADC's range and steps stay."""
+    The motion, the hold, the magnetic field and the ADC's range and steps stay; so do the weather,
+    the building's pressure jumps, the radio world (path loss, shadowing, fading, body and floor
+    losses) and the beacons' own tx power errors (the world, not the phone)."""
     return zeroed(params or PedestrianParams(), _ERROR_FIELDS)
 
 
@@ -262,8 +352,12 @@ def params_with_overrides(overrides: dict[str, str], base: PedestrianParams | No
 
 
 def check(params: PedestrianParams) -> None:
-    """ConfigError when a [min, max] pair is reversed, a batch spans > 4 s, or the floor is above the roof."""
+    """ConfigError when a [min, max] pair is reversed, a batch spans > 4 s, the floor is above the roof,
+    or the barometer samples faster than the IMU."""
     check_pairs_and_batches(params)
     if params.magnetic.floor > params.magnetic.storeys:
         raise ConfigError(f"--set: magnetic.floor = {params.magnetic.floor} exceeds magnetic.storeys = "
                           f"{params.magnetic.storeys}")
+    if params.barometer.rate_hz > params.sensors.rate_hz:
+        raise ConfigError(f"--set: barometer.rate_hz = {params.barometer.rate_hz:g} exceeds sensors.rate_hz = "
+                          f"{params.sensors.rate_hz:g} (pressure is sampled on the IMU's motion)")

@@ -45,6 +45,9 @@ class SmoothPath:
     y_m: np.ndarray
     heading_rad: np.ndarray  # unwrapped
     corners: tuple[Corner, ...]
+    # height above floor 0 at the route's nodes: (arc length, height) knots, linear between
+    # (stairs); None on one floor
+    height_knots: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def length_m(self) -> float:
@@ -55,6 +58,12 @@ class SmoothPath:
         s = np.clip(s_m, 0.0, self.length_m)
         return (np.interp(s, self.s_m, self.x_m), np.interp(s, self.s_m, self.y_m),
                 np.interp(s, self.s_m, self.heading_rad))
+
+    def height_at(self, s_m: np.ndarray) -> np.ndarray:
+        """Height (m) of the floor or stair under the walker above floor 0 at arc lengths `s_m`."""
+        if self.height_knots is None:
+            return np.zeros(np.shape(s_m))
+        return np.interp(np.clip(s_m, 0.0, self.length_m), *self.height_knots)
 
 
 def smooth_path(route: Route, radius_m: float, spacing_m: float = 0.01,
@@ -116,5 +125,9 @@ def smooth_path(route: Route, radius_m: float, spacing_m: float = 0.01,
     s = np.concatenate(pieces_s)
     keep = np.concatenate([[True], np.diff(s) > 1e-9])
     corners.sort(key=lambda c: c.s_m)
+    knots = None
+    if route.z_m and any(route.z_m):  # the route's own nodes are the corners (no map-point passes here)
+        knot_s = np.array([0.0] + [c.s_m for c in corners] + [float(s[keep][-1])])
+        knots = (knot_s, np.asarray(route.z_m, dtype=float))
     return SmoothPath(s[keep], np.concatenate(pieces_x)[keep], np.concatenate(pieces_y)[keep],
-                      np.concatenate(pieces_h)[keep], tuple(corners))
+                      np.concatenate(pieces_h)[keep], tuple(corners), knots)

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
 from protocol.session import Mount
 from sim_devices.devices.clock import jittered_stamps_ns
@@ -23,6 +24,7 @@ from sim_devices.pedestrian.person import Person, draw_person
 from sim_devices.pedestrian.phone import PhoneMotion, StandWindow, exact_signals, phone_motion, stand_windows
 from sim_devices.pedestrian.sensors import MagneticField, draw_phone
 from sim_devices.pedestrian.timeline import Timeline, pause_stops, stand_stops, walk_timeline
+from sim_devices.pedestrian.floors import height_floor
 from sim_devices.pedestrian.venues import Layout
 
 MOUNTS = {"hand": (Mount.HAND,), "pocket": (Mount.POCKET,), "both": (Mount.HAND, Mount.POCKET)}
@@ -81,10 +83,11 @@ def simulate_walker(layout: Layout, index: int, mounts: tuple[Mount, ...], param
     passes = tuple((p.id, p.x_m, p.y_m) for p in layout.map_points)
     path = smooth_path(route, params.gait.turn_radius_m, passes=passes)
     rng = np.random.default_rng(timeline_seed)
-    stops = stand_stops(path, layout.stands, len(mounts), params.stand)
+    stops = stand_stops(path, layout.stands, len(mounts), params.stand, layout.floor_height_m)
     stops += pause_stops(path, stops, params.gait, rng)
     rate = params.sensors.rate_hz
-    timeline = walk_timeline(path, person, stops, params.gait, rate, rng).cut(duration_s)
+    floors = params.floors if path.height_knots is not None else None
+    timeline = walk_timeline(path, person, stops, params.gait, rate, rng, floors).cut(duration_s)
     stands = {stand.id: stand for stand in layout.stands}
     windows = stand_windows(timeline, stands, len(mounts), params, rng)
     start_ns = epoch_ns + int(round(index * params.people.start_interval_s * 1e9))
@@ -93,6 +96,8 @@ def simulate_walker(layout: Layout, index: int, mounts: tuple[Mount, ...], param
     for number, mount in enumerate(mounts):
         phone_rng = np.random.default_rng(phone_seeds[list(MOUNTS["both"]).index(mount)])
         motion = phone_motion(mount, path, timeline, person, windows[number], params, phone_rng)
+        if path.height_knots is not None:  # the floor or stair under the walker carries the phone up
+            motion.position_m[:, 2] += body_height_m(path, timeline, rate)
         accel, gyro = exact_signals(motion, rate)
         field_ut = np.einsum("nji,nj->ni", motion.rotation, field.at(motion.position_m))
         imu = draw_phone(params.sensors, phone_rng)
@@ -102,6 +107,25 @@ def simulate_walker(layout: Layout, index: int, mounts: tuple[Mount, ...], param
                                   reported["accel"].astype(np.float32), reported["gyro"].astype(np.float32),
                                   (reported["mag"] / 100.0).astype(np.float32), motion, imu))  # 1 gauss = 100 uT
     return WalkerRun(person, path, timeline, start_ns, tuple(phones))
+
+
+STAIR_SMOOTHING_S = 0.2  # SD of the smoothing of the body's rise where a flight starts or ends
+
+
+def body_height_m(path: SmoothPath, timeline: Timeline, rate_hz: float) -> np.ndarray:
+    """Height of the body's floor level above floor 0 per sample: the stair's profile smoothed over
+    STAIR_SMOOTHING_S (the body does not change vertical speed in one sample where a flight begins)."""
+    return gaussian_filter1d(path.height_at(timeline.s_m), STAIR_SMOOTHING_S * rate_hz, mode="nearest")
+
+
+def truth_floors(run: WalkerRun, rate_hz: float, floor_height_m: float) -> np.ndarray:
+    """The floor (int64) at each truth_rows time: the nearer floor to the walker's feet (on a stair,
+    the floor being left until half-way; the half landing counts as the upper floor); zeros on one floor."""
+    times = np.arange(0.0, float(run.timeline.time_s[-1]) + 1e-9, 1.0 / rate_hz)
+    if run.path.height_knots is None or floor_height_m <= 0.0:
+        return np.zeros(len(times), dtype=np.int64)
+    height = run.path.height_at(np.interp(times, run.timeline.time_s, run.timeline.s_m))
+    return height_floor(height, floor_height_m)
 
 
 def truth_rows(run: WalkerRun, rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -8,6 +8,11 @@ Time is the integral of ds / v; each stop adds its dwell. The phase of the step 
 the cadence x sqrt(v / cruise) (slower walking shortens both step length and step time) with a
 per-step time error; phase 0 is mid-stance (body highest and slowest), 0.5 the next heel strike.
 
+Stairs (a path with heights): on a flight and its landing the speed is limited to the stair's
+horizontal speed (FloorParams' vertical speed up or down / the flight's slope), reached from and
+left to the walking speed at `acceleration_mps2`; each step there is one tread, so the step phase
+advances at the horizontal speed / `stair_tread_m`.
+
 The position along the path is the base position minus the surge term (forward speed swing within
 a step, zero at step boundaries and at rest), so step lengths in the truth follow the step model.
 """
@@ -21,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from protocol.session import Stand
-from sim_devices.pedestrian.params import GaitParams, StandParams
+from sim_devices.pedestrian.params import FloorParams, GaitParams, StandParams
 from sim_devices.pedestrian.path import SmoothPath
 from sim_devices.pedestrian.person import Person
 
@@ -66,15 +71,19 @@ class Timeline:
                                    stops=tuple(stop for stop in self.stops if stop.start_s <= duration_s))
 
 
-def stand_stops(path: SmoothPath, stands: tuple[Stand, ...], n_phones: int, stand: StandParams) -> list[Stop]:
-    """A stop at each stand the path passes (close to it, heading its way), first passage only."""
+def stand_stops(path: SmoothPath, stands: tuple[Stand, ...], n_phones: int, stand: StandParams,
+                floor_height_m: float = 0.0) -> list[Stop]:
+    """A stop at each stand the path passes (close to it, heading its way, on its floor), first passage only."""
     dwell = n_phones * (stand.place_s + stand.still_s + stand.pick_s)
     stops = []
     for item in stands:
         distance = np.hypot(path.x_m - item.x_m, path.y_m - item.y_m)
         heading_off = np.degrees(np.abs(np.remainder(path.heading_rad - math.radians(item.heading_deg) + math.pi,
                                                      2 * math.pi) - math.pi))
-        hits = np.flatnonzero((distance < STAND_MATCH_M) & (heading_off < STAND_MATCH_DEG))
+        near = (distance < STAND_MATCH_M) & (heading_off < STAND_MATCH_DEG)
+        if path.height_knots is not None:
+            near &= np.abs(path.height_at(path.s_m) - item.floor * floor_height_m) < 1e-6
+        hits = np.flatnonzero(near)
         if len(hits):
             run = hits[: int(np.argmax(np.diff(np.append(hits, hits[-1] + 2)) > 1)) + 1]  # first passage
             stops.append(Stop(float(path.s_m[run[np.argmin(distance[run])]]), dwell, item.id))
@@ -94,8 +103,32 @@ def pause_stops(path: SmoothPath, taken: list[Stop], gait: GaitParams, rng: np.r
     return stops
 
 
-def speed_limit(path: SmoothPath, person: Person, gait: GaitParams, rng: np.random.Generator
-                ) -> tuple[np.ndarray, np.ndarray]:
+def stair_cells(path: SmoothPath, grid: np.ndarray, floor_height_m: float) -> np.ndarray:
+    """True where the grid lies on a stair (a flight or its landing: between two floors)."""
+    level = path.height_at(grid) / floor_height_m
+    return np.abs(level - np.round(level)) > 1e-6
+
+
+def stair_limit(path: SmoothPath, grid: np.ndarray, floors: FloorParams, acceleration_mps2: float) -> np.ndarray:
+    """Speed limit from the stairs: the stair's horizontal speed on each flight and landing, rising at
+    `acceleration_mps2` with the distance from it."""
+    limit = np.full(len(grid), np.inf)
+    on = stair_cells(path, grid, floors.height_m)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], on.astype(np.int8), [0]])))
+    height = path.height_at(grid)
+    for first, end in zip(edges[::2], edges[1::2]):
+        last = end - 1
+        slope = float(np.max(np.abs(np.gradient(height[first:end + 1], grid[first:end + 1]))))
+        up = height[min(end, len(grid) - 1)] > height[max(first - 1, 0)]
+        vertical = floors.stair_up_vertical_mps if up else floors.stair_down_vertical_mps
+        horizontal = vertical / max(slope, 1e-3)
+        distance = np.maximum(np.maximum(grid[first] - grid, grid - grid[last]), 0.0)
+        limit = np.minimum(limit, np.sqrt(horizontal ** 2 + 2.0 * acceleration_mps2 * distance))
+    return limit
+
+
+def speed_limit(path: SmoothPath, person: Person, gait: GaitParams, rng: np.random.Generator,
+                floors: FloorParams | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(arc-length grid, speed limit from cruise, per-step variation and corners) before stops."""
     grid = np.arange(0.0, path.length_m + GRID_M / 2, GRID_M)
     # step length CV = combined speed and step-time variation: the speed part carries the rest
@@ -113,13 +146,16 @@ def speed_limit(path: SmoothPath, person: Person, gait: GaitParams, rng: np.rand
         outside = np.maximum(before, after)  # 0 inside the arc, 1 far from it
         taper = 0.5 - 0.5 * np.cos(math.pi * outside)
         limit = np.minimum(limit, person.speed_mps * factor * (low + (1.0 - low) * taper))
+    if floors is not None and path.height_knots is not None:
+        limit = np.minimum(limit, stair_limit(path, grid, floors, gait.acceleration_mps2))
     return grid, limit
 
 
 def walk_timeline(path: SmoothPath, person: Person, stops: list[Stop], gait: GaitParams, rate_hz: float,
-                  rng: np.random.Generator) -> Timeline:
-    """The walker's progress along `path` with `stops` (sorted by arc length; one at the end is added)."""
-    grid, limit = speed_limit(path, person, gait, rng)
+                  rng: np.random.Generator, floors: FloorParams | None = None) -> Timeline:
+    """The walker's progress along `path` with `stops` (sorted by arc length; one at the end is added);
+    `floors` for a path with stairs."""
+    grid, limit = speed_limit(path, person, gait, rng, floors)
     ordered = sorted(stops, key=lambda stop: stop.s_m)
     marks = np.array([0.0] + [stop.s_m for stop in ordered] + [path.length_m])
     middle = (grid[1:] + grid[:-1]) / 2
@@ -141,7 +177,10 @@ def walk_timeline(path: SmoothPath, person: Person, stops: list[Stop], gait: Gai
     base = np.interp(time, t_nodes, s_nodes)
     base_speed = np.gradient(base, 1.0 / rate_hz)
     base_speed[base_speed < 1e-3] = 0.0
-    phase = _phase(base_speed, person, gait, rate_hz, rng)
+    tread_hz = None
+    if floors is not None and path.height_knots is not None:  # on a stair, one step per tread
+        tread_hz = np.where(stair_cells(path, base, floors.height_m), base_speed / floors.stair_tread_m, np.nan)
+    phase = _phase(base_speed, person, gait, rate_hz, rng, tread_hz)
     share = base_speed / person.speed_mps
     surge_m = gait.surge_ratio * person.step_length_m / (2.0 * math.pi)
     position = np.clip(base - surge_m * share * np.sin(2.0 * math.pi * phase), 0.0, path.length_m)
@@ -149,9 +188,12 @@ def walk_timeline(path: SmoothPath, person: Person, stops: list[Stop], gait: Gai
 
 
 def _phase(speed: np.ndarray, person: Person, gait: GaitParams, rate_hz: float,
-           rng: np.random.Generator) -> np.ndarray:
-    """Step cycles since the start; each step's duration varies by `step_time_cv`."""
+           rng: np.random.Generator, tread_hz: np.ndarray | None = None) -> np.ndarray:
+    """Step cycles since the start; each step's duration varies by `step_time_cv`. `tread_hz`: the
+    step rate on stairs (NaN elsewhere)."""
     rate = person.cadence_hz * np.sqrt(np.clip(speed / person.speed_mps, 0.0, 2.0)) / rate_hz
+    if tread_hz is not None:
+        rate = np.where(np.isnan(tread_hz), rate, np.nan_to_num(tread_hz) / rate_hz)
     errors = 1.0 + rng.normal(0.0, gait.step_time_cv, int(np.sum(rate)) + 16)
     phase = np.empty(len(speed))
     value = 0.0

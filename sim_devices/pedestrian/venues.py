@@ -14,6 +14,8 @@ checked against the walkable area with shapely (a body-wide strip along it must 
   two pillars at its east end. The walkable area is one polygon with holes (the block's walls, the
   pillars) plus the store room; three tours visit rooms and the hall. No map points: the plan is
   the map.
+- `floors`: the office on two floors joined by a straight staircase with a half landing
+  (sim_devices/pedestrian/floors.py); each floor has its own plan.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from hub.pedestrian.walkable import WalkableSettings, corridor_graph, corridors_
 from protocol.errors import ConfigError
 from protocol.session import MapPoint, Stand
 
-PRESETS = ("paper", "floorplan")
+PRESETS = ("paper", "floorplan", "floors")
 BODY_HALF_WIDTH_M = 0.25  # half a shoulder width: the strip along a route that must be walkable
 
 # The paper's table 5: point, x cm, y cm, unit vectors of the corridors leaving it.
@@ -59,6 +61,7 @@ class Route:
 
     nodes: tuple[str, ...]
     xy_m: tuple[tuple[float, float], ...]
+    z_m: tuple[float, ...] = ()  # floor height under each node (m above floor 0); empty: all on floor 0
 
     def length_m(self) -> float:
         return sum(math.dist(a, b) for a, b in zip(self.xy_m, self.xy_m[1:]))
@@ -73,6 +76,9 @@ class Layout:
     stands: tuple[Stand, ...]
     routes: tuple[Route, ...]
     size_m: tuple[float, float]  # bounding box of the walkable area (venue court length, width)
+    floor_plans: tuple[tuple[int, tuple[list[list[list[float]]], ...]], ...] = ()  # per floor, when they differ
+    beacon_places: tuple[tuple[int, float, float], ...] = ()  # (floor, x, y) where beacons may go, spread first
+    floor_height_m: float = 0.0  # floor-to-floor height (0: one floor)
 
 
 def _direction_deg(x: float, y: float) -> float:
@@ -184,11 +190,26 @@ def _floorplan(offset_m: float, people: int) -> Layout:
                   (max_x - min_x, max_y - min_y))
 
 
-def layout(preset: str, people: int, stand_offset_m: float = 1.0) -> Layout:
+# Beacon places (ceiling-mounted over the corridor centre line), spread first: paper = its junctions.
+PAPER_BEACON_POINTS = ("I", "G", "H", "C", "A", "K", "L", "D")
+FLOOR_BEACON_PLACES = ((11.0, 5.2), (28.6, 5.2), (34.8, 12.0), (25.0, 18.8), (10.4, 18.8), (5.2, 12.0),
+                       (41.0, 12.0), (43.5, 19.5))
+
+
+def layout(preset: str, people: int, stand_offset_m: float = 1.0, floor_height_m: float = 4.0) -> Layout:
     """The named preset's layout for `people` walkers; ConfigError for an unknown preset or a route
-    that leaves the walkable area."""
+    that leaves the walkable area (of its floor; a stair segment: of the stairwell)."""
     if preset not in PRESETS:
         raise ConfigError(f"preset: {preset!r} is not one of {', '.join(PRESETS)}")
+    if preset == "floors":
+        from sim_devices.pedestrian.floors import floors_layout, route_problem_by_floor
+
+        result = floors_layout(stand_offset_m, people, floor_height_m)
+        for number, route in enumerate(result.routes):
+            problem = route_problem_by_floor(route, result)
+            if problem:
+                raise ConfigError(f"preset {preset}: route {number + 1} {problem}")
+        return result
     result = _paper(stand_offset_m, people) if preset == "paper" else _floorplan(stand_offset_m, people)
     area = walkable_geometry(result)
     for number, route in enumerate(result.routes):
@@ -198,7 +219,21 @@ def layout(preset: str, people: int, stand_offset_m: float = 1.0) -> Layout:
     return result
 
 
+def beacon_places(result: Layout) -> tuple[tuple[int, float, float], ...]:
+    """(floor, x, y) where beacons may go, spread first (the first N are used)."""
+    if result.beacon_places:
+        return result.beacon_places
+    if result.map_points:
+        where = {p.id: (p.x_m, p.y_m) for p in result.map_points}
+        return tuple((0, *where[name]) for name in PAPER_BEACON_POINTS)
+    return tuple((0, x, y) for x, y in FLOOR_BEACON_PLACES)
+
+
 def walkable_geometry(result: Layout) -> BaseGeometry:
+    """The walkable area; of a building with several floors, the union of its floors (a 2-D check
+    only; `floors.route_problem_by_floor` checks each floor)."""
+    if result.floor_plans:
+        return shapely.union_all([plan_area(plan) for _, plan in result.floor_plans])
     return area_of(result.floor_plan, result.map_points)
 
 

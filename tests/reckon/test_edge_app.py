@@ -197,3 +197,37 @@ def test_ble_source_configuration_errors(tmp_path):
     with pytest.raises(ConfigError, match="--venue VENUE.toml is needed with BLE sources"):
         open_sources([f"chair01-seat=ble://{THINGY_SEAT}"], "chair01", 0.0, stop, ble_factories=factories)
     assert radio.made == []  # nothing was started
+
+
+def test_a_phone_edge_forwards_its_barometer_and_names_floors(free_endpoint, tmp_path):
+    """A walker of the two-floor simulated building through `reckon edge`: the Pressure readings go on
+    to the bus as they came, and the edge's poses name floor 1 after the stairs."""
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    from sim_devices.pedestrian import simulate_pedestrian
+
+    walk = tmp_path / "floors.mcap"
+    simulate_pedestrian(walk, seed=1, people=1, preset="floors", mount="hand", duration_s=60.0)
+    output = tmp_path / "edge.mcap"
+    stop, ready = threading.Event(), threading.Event()
+    session = read_session(walk).session
+    endpoint = free_endpoint()
+    recorder = threading.Thread(target=record, args=(zenoh_config(listen=[endpoint]), session.venue.name, output,
+                                                     stop, ready), kwargs={"description": session}, daemon=True)
+    recorder.start()
+    assert ready.wait(WAIT_S)
+    source = mcap_source(walk, "p01", speed=0.0, stop=threading.Event())
+    run_edge(zenoh_config(connect=[endpoint]), session, "p01", source, threading.Event(), wait_for=1)
+    stop.set()
+    recorder.join(WAIT_S)
+    with open(walk, "rb") as f:
+        sent = [m.pressure_hpa for _, c, _, m in make_reader(f, decoder_factories=[DecoderFactory()])
+                .iter_decoded_messages() if "/pressure/" in c.topic]
+    with open(output, "rb") as f:
+        seen = [(c.topic, m) for _, c, _, m in make_reader(f, decoder_factories=[DecoderFactory()])
+                .iter_decoded_messages()]
+    pressures = [m.pressure_hpa for topic, m in seen if topic == "reckon/pdr-office-2f/p01/pressure/p01-hand"]
+    assert len(sent) > 500 and pressures == sent
+    floors = [m.floor for topic, m in seen if topic == "reckon/pdr-office-2f/p01/pose/edge"]
+    assert floors[0] == 0 and floors[-1] == 1 and sorted(floors) == floors  # one change, up

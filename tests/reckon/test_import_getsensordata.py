@@ -128,6 +128,7 @@ def test_truth_is_in_metres_east_and_north_of_the_origin(imported):
     assert truth.x_m[0] == math.ceil(west_m + COURT_MARGIN_M) and truth.y_m[0] == 0.0
     assert "40.0000000, -3.0000000 (the first POSI point), which lies at x 48, y 0 m" in data.session.source["frame"]
     assert data.session.source["truth_floors"] == ["0", "0", "1"]
+    assert truth.floor.tolist() == [0, 0, 1]  # on the truth poses themselves, for the IPIN score
     venue = data.session.venue
     assert venue.court_length_m >= truth.x_m.max() + COURT_MARGIN_M and venue.court_width_m >= truth.y_m.max()
     field = venue_field(40.0, -3.0, creation_time_ns("Fri Jul 27 11:28:34 GMT+02:00 2018"))
@@ -156,7 +157,7 @@ def test_beacons_and_their_sightings(imported):
     assert ibeacon.x_m - truth.x_m[0] == pytest.approx(-west_m, abs=0.01)
     assert ibeacon.y_m - truth.y_m[0] == pytest.approx(M_40 * math.radians(0.0005), abs=0.01)
     assert (eddystone.x_m, eddystone.y_m) == pytest.approx((truth.x_m[2], truth.y_m[2]), abs=1e-6)
-    assert data.session.source["beacon_floors"] == {"beacon-1": 0, "beacon-2": 1}
+    assert (ibeacon.floor, eddystone.floor) == (0, 1)
     sightings = data.sightings["walker"]
     # known beacons by their venue id (as the live edge writes them), the others by identity
     assert sightings.beacon_id.tolist() == ["beacon-1", f"ibeacon:{UUID}:9:9", "beacon-2", "eddystone:ffffffffffff"]
