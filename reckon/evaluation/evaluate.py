@@ -18,7 +18,7 @@ from reckon.evaluation.inputs import EvalInputs, agent_impacts, build_inputs
 from reckon.evaluation.metrics import (DetectionScore, ErrorSummary, average_summaries, error_summary,
                                        score_collisions)
 from reckon.evaluation.paper_run import VIDEO_RUNS, reception_from_sightings, reception_from_truth, run_paper
-from reckon.evaluation.reckon_run import log_inputs, run_reckon
+from reckon.evaluation.reckon_run import log_inputs, run_reckon, without_magnetometer
 
 log = logging.getLogger(__name__)
 
@@ -28,6 +28,7 @@ CORRECTION_SETS: tuple[tuple[str, ...], ...] = (
 )
 RECKON_CORRECTION_SETS: tuple[tuple[str, ...], ...] = ((), ("beacon",), ("collision",), ("beacon", "collision"))
 # with camera tracks in the session, also: ("camera",) and ("beacon", "collision", "camera")
+GYRO_ONLY = "gyro"  # our heading without the seat magnetometer (the magnetometer aid's ablation)
 DETECTION_THRESHOLDS_G = tuple(float(g) for g in range(4, 13))  # the paper's Fig. 5 range
 
 
@@ -42,6 +43,7 @@ class ResultRow:
     team_curve_m: np.ndarray  # team-mean error per frame (first run for random fixes)
     x_m: np.ndarray  # (agents, frames) estimate of the first run
     y_m: np.ndarray
+    nees: float | None = None  # ours live: median over frames of the position NEES (honest: 1.39)
 
 
 @dataclass
@@ -64,6 +66,19 @@ def detect_collisions(inputs: EvalInputs, threshold_g: float) -> list[Collision]
 def evaluate(path: Path, progress: Callable[[str], None] = lambda _: None) -> EvalReport:
     data = read_session(path)
     return evaluate_data(data, path, progress)
+
+
+def position_nees(dx: np.ndarray, dy: np.ndarray, covariance: np.ndarray) -> float | None:
+    """Median over agents and frames of e' P^-1 e, P the stated xx, xy, yy; None if no pose states one.
+
+    For an honest Gaussian covariance e' P^-1 e is chi-square with 2 dof: mean 2, median 1.39; larger
+    means the pose claims more certainty than it has."""
+    xx, xy, yy = covariance[..., 0], covariance[..., 1], covariance[..., 2]
+    det = xx * yy - xy * xy
+    with np.errstate(invalid="ignore", divide="ignore"):
+        value = (yy * dx * dx - 2.0 * xy * dx * dy + xx * dy * dy) / det
+    value = value[np.isfinite(value) & (det > 0)]
+    return float(np.median(value)) if len(value) else None
 
 
 def evaluate_data(data: SessionData, path: Path, progress: Callable[[str], None] = lambda _: None) -> EvalReport:
@@ -116,12 +131,17 @@ def evaluate_data(data: SessionData, path: Path, progress: Callable[[str], None]
         progress("reckon: reading the log in arrival order")
         arrivals = log_inputs(path)
         camera_sets = (("camera",), ("beacon", "collision", "camera")) if data.cameras else ()
-        for corrections in RECKON_CORRECTION_SETS + camera_sets:
-            progress(f"reckon, corrections {'+'.join(corrections) or 'none'}")
+        runs = [(HeadingSource.SENSORS.value, arrivals, c) for c in RECKON_CORRECTION_SETS + camera_sets]
+        if any(a.seat_mag is not None for a in inputs.agents):  # the magnetometer aid's ablation
+            runs.append((GYRO_ONLY, without_magnetometer(arrivals), ()))
+        for heading_name, messages_in, corrections in runs:
+            progress(f"reckon, heading {heading_name}, corrections {'+'.join(corrections) or 'none'}")
             for track, estimate in zip(("live", "refined"),
-                                       run_reckon(data.session, arrivals, inputs.frame_ns, frozenset(corrections))):
-                error = np.hypot(estimate.x_m - truth_x, estimate.y_m - truth_y)
-                report.rows.append(ResultRow("reckon", HeadingSource.SENSORS.value, corrections, track,
+                                       run_reckon(data.session, messages_in, inputs.frame_ns, frozenset(corrections))):
+                dx, dy = estimate.x_m - truth_x, estimate.y_m - truth_y
+                error = np.hypot(dx, dy)
+                nees = None if estimate.covariance_m2 is None else position_nees(dx, dy, estimate.covariance_m2)
+                report.rows.append(ResultRow("reckon", heading_name, corrections, track,
                                              error_summary(error, frame_s), estimate.corrections_applied,
-                                             np.nanmean(error, axis=0), estimate.x_m, estimate.y_m))
+                                             np.nanmean(error, axis=0), estimate.x_m, estimate.y_m, nees))
     return report

@@ -10,7 +10,7 @@ matplotlib.use("Agg")  # files only; no display on a Pi or in CI
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from reckon.evaluation.evaluate import EvalReport  # noqa: E402
+from reckon.evaluation.evaluate import EvalReport, ResultRow  # noqa: E402
 
 # The paper's dead-reckoning curve (video heading, Fig. 7 and sec. 4.3): ~2.2 m after 2 min, 5.3 m max.
 PAPER_DR_POINTS = ((120.0, 2.2), (317.0, 5.3))
@@ -25,15 +25,18 @@ def write_plots(report: EvalReport, folder: Path, court_m: tuple[float, float]) 
 
 
 def _errors(report: EvalReport, path: Path) -> Path:
-    headings = sorted({row.heading for row in report.rows}, key=["true", "video", "sensors"].index)
+    def panel(row: ResultRow) -> str:  # ours, with or without the magnetometer, beside the paper's sensors
+        return "sensors" if row.track else row.heading
+
+    headings = sorted({panel(row) for row in report.rows}, key=["true", "video", "sensors"].index)
     # each heading its own scale: the magnetometer's error is tens of times the others'
     fig, axes = plt.subplots(1, len(headings), figsize=(5.5 * len(headings), 4.2), squeeze=False)
     for ax, heading in zip(axes[0], headings):
         for row in report.rows:
-            if row.heading == heading:
+            if panel(row) == heading:
                 label = "+".join(row.corrections) or "none"
                 if row.track:
-                    label = f"reckon {row.track}: {label}"
+                    label = f"reckon {row.track}{' gyro only' if row.heading == 'gyro' else ''}: {label}"
                 ax.plot(report.frame_s, row.team_curve_m, lw=1.6 if row.track else 1.0,
                         ls="-" if row.track else "--", label=label)
         ax.plot(*zip(*PAPER_DR_POINTS), "k*", ms=11, label="paper DR (video heading)")

@@ -12,6 +12,7 @@ the hub's fixed-lag track, interpolated at the frames.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +39,7 @@ class ReckonEstimate:
     x_m: np.ndarray  # (agents, frames)
     y_m: np.ndarray
     corrections_applied: int
+    covariance_m2: np.ndarray | None = None  # (agents, frames, 3): xx, xy, yy of the pose's stated covariance
 
 
 def log_inputs(path: Path | str) -> list[tuple[int, Any]]:
@@ -53,7 +55,7 @@ def log_inputs(path: Path | str) -> list[tuple[int, Any]]:
 
 def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubSettings,
                  identities: list[Any] | None = None) -> tuple[VenueHub, dict, dict]:
-    """(hub, live, refined): per agent, arrays (time_ns, x, y) of the hub's two tracks.
+    """(hub, live, refined): per agent, arrays (time_ns, x, y, cov xx, cov xy, cov yy) of the hub's two tracks.
 
     `identities`, if given, receives the hub's TrackIdentity messages in order."""
     hub = VenueHub(session, settings, clock=time.perf_counter)  # times the identity engine's hops
@@ -69,7 +71,7 @@ def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubS
                 if identities is not None:
                     identities.append(out)
             else:
-                tracks[out.track].setdefault(out.agent_id, []).append((out.timestamp_ns, out.x_m, out.y_m))
+                tracks[out.track].setdefault(out.agent_id, []).append(_row(out))
 
     arrival_ns = 0
     for arrival_ns, message in inputs:
@@ -82,29 +84,54 @@ def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubS
         for out in edge.flush():
             to_hub(out, arrival_ns)
     for out in hub.flush():
-        tracks[out.track].setdefault(out.agent_id, []).append((out.timestamp_ns, out.x_m, out.y_m))
+        tracks[out.track].setdefault(out.agent_id, []).append(_row(out))
     as_arrays = {track: {agent: np.array(rows) for agent, rows in by_agent.items()} for track, by_agent in tracks.items()}
     return hub, as_arrays[messages.Track.LIVE], as_arrays[messages.Track.REFINED]
 
 
+def _row(pose: Any) -> tuple[float, ...]:
+    """(time, x, y, cov xx, xy, yy) of an EstimatedPose; NaN covariance when it states none."""
+    cov = pose.covariance[:]
+    xx, xy, yy = (cov[0], cov[1], cov[4]) if len(cov) == 9 else (math.nan,) * 3
+    return pose.timestamp_ns, pose.x_m, pose.y_m, xx, xy, yy
+
+
 def run_reckon(session: Session, inputs: list[tuple[int, Any]], frame_ns: np.ndarray, corrections: frozenset[str],
                lag_s: float = HubSettings.lag_s) -> tuple[ReckonEstimate, ReckonEstimate]:
-    """(live, refined) estimates of every agent of `session` at `frame_ns`."""
+    """(live, refined) estimates of every agent of `session` at `frame_ns`; the live one with its covariance."""
     hub, live, refined = run_lockstep(session, inputs, HubSettings(corrections=corrections, lag_s=lag_s))
     applied = sum(sum(view.applied.values()) for view in hub.agents.values())
     ids = [agent.id for agent in session.agents]
-    live_xy = [_newest_at(live.get(agent_id), frame_ns) for agent_id in ids]
+    live_rows = np.array([_newest_at(live.get(agent_id), frame_ns) for agent_id in ids])  # (agents, frames, 5)
     refined_xy = [_interpolated(refined.get(agent_id), frame_ns) for agent_id in ids]
-    return (ReckonEstimate(np.array([xy[0] for xy in live_xy]), np.array([xy[1] for xy in live_xy]), applied),
+    return (ReckonEstimate(live_rows[:, :, 0], live_rows[:, :, 1], applied, live_rows[:, :, 2:]),
             ReckonEstimate(np.array([xy[0] for xy in refined_xy]), np.array([xy[1] for xy in refined_xy]), applied))
 
 
-def _newest_at(track: np.ndarray | None, frame_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The newest pose at or before each frame (the first pose before there is one)."""
+def without_magnetometer(inputs: list[tuple[int, Any]]) -> list[tuple[int, Any]]:
+    """The same arrivals with every ImuBatch's magnetometer readings removed (the gyro-only ablation)."""
+    out = []
+    for arrival_ns, message in inputs:
+        if messages.type_name(message) == "ImuBatch" and len(message.mag_gauss):
+            message = _copied(message)
+            del message.mag_gauss[:]
+        out.append((arrival_ns, message))
+    return out
+
+
+def _copied(message: Any) -> Any:
+    duplicate = type(message)()
+    duplicate.CopyFrom(message)
+    return duplicate
+
+
+def _newest_at(track: np.ndarray | None, frame_ns: np.ndarray) -> np.ndarray:
+    """(frames, 5): x, y and covariance xx, xy, yy of the newest pose at or before each frame (the first pose
+    before there is one)."""
     if track is None or len(track) == 0:
-        return np.full(len(frame_ns), np.nan), np.full(len(frame_ns), np.nan)
+        return np.full((len(frame_ns), 5), np.nan)
     index = np.clip(np.searchsorted(track[:, 0], frame_ns, side="right") - 1, 0, len(track) - 1)
-    return track[index, 1], track[index, 2]
+    return track[index, 1:6]
 
 
 def _interpolated(track: np.ndarray | None, frame_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

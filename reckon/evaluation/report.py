@@ -19,7 +19,8 @@ def to_json(report: EvalReport) -> dict[str, Any]:
             {"method": row.method, "heading": row.heading, "corrections": list(row.corrections),
              **({"track": row.track} if row.track else {}),
              **{k: _round(v) for k, v in dataclasses.asdict(row.summary).items()},
-             "corrections_applied": row.corrections_applied}
+             "corrections_applied": row.corrections_applied,
+             **({"nees": _round(row.nees)} if row.nees is not None else {})}
             for row in report.rows
         ],
         "collision_detection": [
@@ -35,15 +36,18 @@ def to_table(report: EvalReport) -> str:
     lines = [f"session {report.session_path}: {len(report.agent_ids)} agents, "
              f"{report.frame_s[-1]:.0f} s, errors per 10 fps frame",
              f"{'method':15} {'heading':8} {'corrections':26} {'mean':>6} {'max team':>9} {'worst':>6} "
-             f"{'final':>6} {'@120s':>6} {'fixes':>6}"]
+             f"{'final':>6} {'@120s':>6} {'fixes':>6} {'NEES':>5}"]
     for row in report.rows:
         s = row.summary
         method = f"{row.method} {row.track}" if row.track else row.method
         lines.append(f"{method:15} {row.heading:8} {'+'.join(row.corrections) or 'none':26} "
                      f"{s.mean_error_m:6.2f} {s.max_team_mean_error_m:9.2f} {s.worst_agent_mean_error_m:6.2f} "
-                     f"{s.final_team_mean_error_m:6.2f} {s.team_mean_error_at_120s_m:6.2f} {row.corrections_applied:6d}")
+                     f"{s.final_team_mean_error_m:6.2f} {s.team_mean_error_at_120s_m:6.2f} {row.corrections_applied:6d} "
+                     f"{'' if row.nees is None else f'{row.nees:5.2f}'}".rstrip())
     lines.append("errors in metres: mean over agents and time; max over time of the team mean (the paper's "
-                 "figure); worst agent's mean; team mean at the end and at 120 s")
+                 "figure); worst agent's mean; team mean at the end and at 120 s; heading 'gyro': ours without the "
+                 "seat magnetometer; NEES: ours live, median of the position error squared over the stated "
+                 "covariance (1.39 if the covariance is honest)")
     lines.append("")
     lines.append("collision detection (pairs within 0.5 s; 3+ chairs at once skipped), against true contacts")
     lines.append(f"{'threshold g':>11} {'detected':>8} {'true':>5} {'precision':>9} {'recall':>6}")

@@ -40,8 +40,11 @@ def test_eval_json_has_every_heading_and_correction_set(game, capsys):
     ours = [r for r in rows if r["method"] == "reckon"]
     assert {r["heading"] for r in paper} == {"true", "video", "sensors"}
     assert {tuple(r["corrections"]) for r in paper} >= {(), ("beacon",), ("collision",), ("beacon", "collision"), ("video",)}
-    assert {(tuple(r["corrections"]), r["track"]) for r in ours} == {
-        (c, t) for c in ((), ("beacon",), ("collision",), ("beacon", "collision")) for t in ("live", "refined")}
+    assert {(r["heading"], tuple(r["corrections"]), r["track"]) for r in ours} == {
+        ("sensors", c, t) for c in ((), ("beacon",), ("collision",), ("beacon", "collision"))
+        for t in ("live", "refined")} | {("gyro", (), "live"), ("gyro", (), "refined")}
+    assert all(0.0 < r["nees"] < 1e6 for r in ours if r["track"] == "live")
+    assert not any("nees" in r for r in rows if r.get("track") != "live")
     assert len(paper) + len(ours) == len(rows)
     for row in rows:
         assert RESULT_KEYS <= set(row)
