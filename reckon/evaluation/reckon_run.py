@@ -113,16 +113,12 @@ def without_magnetometer(inputs: list[tuple[int, Any]]) -> list[tuple[int, Any]]
     out = []
     for arrival_ns, message in inputs:
         if messages.type_name(message) == "ImuBatch" and len(message.mag_gauss):
-            message = _copied(message)
-            del message.mag_gauss[:]
+            gyro_only = messages.ImuBatch()
+            gyro_only.CopyFrom(message)  # the arrivals are shared with the other runs: never edit them
+            del gyro_only.mag_gauss[:]
+            message = gyro_only
         out.append((arrival_ns, message))
     return out
-
-
-def _copied(message: Any) -> Any:
-    duplicate = type(message)()
-    duplicate.CopyFrom(message)
-    return duplicate
 
 
 def _newest_at(track: np.ndarray | None, frame_ns: np.ndarray) -> np.ndarray:
