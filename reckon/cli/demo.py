@@ -18,7 +18,8 @@ def run_demo(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     game = out / "game.mcap"
-    sim_args = argparse.Namespace(players=args.players, duration=args.duration, seed=args.seed, output=game, set=[])
+    sim_args = argparse.Namespace(players=args.players, duration=args.duration, seed=args.seed, output=game, set=[],
+                                  world=0)
     print(f"simulating {args.players} chairs for {args.duration:.0f} s (seed {args.seed}) -> {game}", file=sys.stderr)
     run_sim(sim_args, progress)
     print(f"\nlive: {args.players} edge processes and a hub over Zenoh on loopback, {args.speed:g} x real time",
@@ -32,7 +33,8 @@ def run_demo(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
           f"mean error live {result.mean_error_m['live']:.2f} m, refined {result.mean_error_m['refined']:.2f} m; "
           f"corrections {', '.join(f'{k} {v}' for k, v in sorted(corrections.items())) or 'none'}")
     print()
-    eval_args = argparse.Namespace(session=[game], json=False, plots=out / "plots", identity_scaling=False)
+    eval_args = argparse.Namespace(session=[game], json=False, plots=out / "plots", identity_scaling=False,
+                                   worlds=None)
     return run_eval(eval_args, progress)
 
 

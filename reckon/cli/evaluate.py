@@ -19,6 +19,12 @@ def run_eval(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     from reckon.evaluation.report import to_json, to_table
     from reckon.evaluation.swim_eval import evaluate_swim, is_swim_session
 
+    if args.worlds is not None:
+        if args.session:
+            raise ReckonError("reckon eval: give session logs or --worlds, not both")
+        return _run_worlds(args, progress)
+    if not args.session:
+        raise ReckonError("reckon eval: give a session log (or --worlds A-B)")
     paths = [Path(p) for p in args.session]
     sessions = [(read_session(p), p) for p in paths]
     if all(pdr_eval.is_pedestrian_session(data) for data, _ in sessions):
@@ -60,9 +66,30 @@ def run_eval(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     return 0
 
 
+def _run_worlds(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from reckon.evaluation import worlds_eval
+    from sim_devices.wheelchair.worlds import parse_worlds
+
+    worlds = parse_worlds(args.worlds)
+    command = (f"reckon eval --worlds {args.worlds} --seed {args.seed} --players {args.players} "
+               f"--duration {args.duration:g}")
+    progress(f"{len(worlds)} worlds, {args.players} chairs for {args.duration:g} s each")
+    results = worlds_eval.evaluate_worlds(worlds, args.seed, args.players, args.duration, args.jobs, progress)
+    summary = worlds_eval.summarise(results)
+    print(json.dumps({"command": command, **summary}, indent=1) if args.json
+          else worlds_eval.to_table(summary, command))
+    return 0
+
+
 def register(sub: Any) -> None:
     ev = sub.add_parser("eval", help="run the estimators over a session and score them against truth")
-    ev.add_argument("session", nargs="+", help="a session log; pedestrian walks: several, pooled")
+    ev.add_argument("session", nargs="*", help="a session log; pedestrian walks: several, pooled")
+    ev.add_argument("--worlds", metavar="A-B", help="instead of a log: simulate one wheelchair game in each of "
+                    "worlds A..B (docs/simulator-worlds.md) and report the spread over worlds")
+    ev.add_argument("--seed", type=int, default=1, help="with --worlds: the game's motion seed")
+    ev.add_argument("--players", type=int, default=10, help="with --worlds: chairs per game")
+    ev.add_argument("--duration", type=float, default=317.0, help="with --worlds: seconds per game")
+    ev.add_argument("--jobs", type=int, help="with --worlds: worker processes (default: one per core)")
     ev.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     ev.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR")
     ev.add_argument("--identity-scaling", action="store_true",

@@ -11,11 +11,12 @@ from reckon.cli.common import overrides
 
 def run_sim(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     from sim_devices.wheelchair import params_with_overrides, simulate
+    from sim_devices.wheelchair.worlds import world_params
 
-    params = params_with_overrides(overrides(args.set))
+    params = params_with_overrides(overrides(args.set), world_params(args.world))
     summary = simulate(args.players, args.duration, args.seed, Path(args.output), params,
                        progress=lambda fraction: progress(f"simulating: {100 * fraction:.0f} %"),
-                       camera=getattr(args, "camera", False))
+                       camera=getattr(args, "camera", False), world=args.world)
     print(summary)
     return 0
 
@@ -69,6 +70,9 @@ def register(sub: Any) -> None:
     chairs.add_argument("--players", type=int, default=10)
     chairs.add_argument("--duration", type=float, default=317.0, help="seconds (the paper's game: 317)")
     _seed_output_set(chairs, "docs/simulator.md")
+    chairs.add_argument("--world", type=int, default=0,
+                        help="draw every error source from its documented range, world K independent of --seed; "
+                             "0: the simulator's defaults (docs/simulator-worlds.md)")
     chairs.add_argument("--camera", action="store_true",
                         help="add a simulated court tracker's anonymous tracks and their truth labels, two referees "
                              "included (docs/simulator-camera.md)")

@@ -6,7 +6,8 @@ Per chair: the measured wheel diameter (0.61 m, or 0.67 m for round(`chair.large
 Per sensor: error-free signal (`kinematics`), impacts and vibration (`impacts`), then the sensor's
 errors (`sim_devices.devices.imu`: a mounting misalignment, the gyroscope's then the
 accelerometer's scale and bias; per sample gyro bias walk and noise, accelerometer noise,
-saturation, quantisation) and its clock (`sim_devices.devices.clock`: offset, drift, jitter); the
+saturation, quantisation), a gyro warm-up (the bias moves by a drawn change with time constant
+`sensors.gyro_warmup_s` after power-on) and its clock (`sim_devices.devices.clock`: offset, drift, jitter); the
 seat also gets its magnetometer (`magnetic`). Wheel sensors have no magnetometer stream: on a
 spinning wheel beside steel spokes and hub its reading is dominated by the wheel's own rotation and
 iron, and the estimator takes heading from the seat.
@@ -21,7 +22,7 @@ import numpy as np
 
 from sim_devices.common import small_rotation
 from sim_devices.devices.clock import DeviceClock
-from sim_devices.devices.imu import Imu, Triad, accel_triad, gyro_triad
+from sim_devices.devices.imu import Imu, Triad, accel_triad, digitise, gyro_triad
 from sim_devices.wheelchair.impacts import Impact, add_impacts, add_vibration
 from sim_devices.wheelchair.kinematics import ChairBuild, seat_imu, wheel_imu
 from sim_devices.wheelchair.magnetic import CourtField, seat_magnetometer
@@ -43,6 +44,7 @@ class ImuStream:
     gyro_dps: np.ndarray  # (steps, 3) float32
     accel_g: np.ndarray
     mag_gauss: np.ndarray | None
+    gyro_warmup_dps: np.ndarray  # (3,) the bias change the warm-up reaches, deg/s
 
 
 def agent_id(index: int) -> str:
@@ -99,8 +101,13 @@ def _finish(agent: str, sensor: str, motion: Motion, gyro: np.ndarray, accel: np
     clock = DeviceClock.draw(rng, start_unix_s=clocks.start_unix_s, offset_ms=clocks.offset_ms,
                              drift_ppm=clocks.drift_ppm, jitter_ms=clocks.jitter_ms)
     stamps = clock.stamp_ns(motion.time_s, rng, period_s=1.0 / params.sensors.rate_hz)
+    warmup = np.zeros(3)
+    if params.sensors.gyro_warmup_dps > 0:  # drawn last, so the other draws do not depend on it
+        warmup = rng.normal(0.0, params.sensors.gyro_warmup_dps, 3)
+        rise = 1.0 - np.exp(-motion.time_s / params.sensors.gyro_warmup_s)
+        reported["gyro"] = digitise(reported["gyro"] + np.outer(rise, warmup), imu.triads["gyro"])
     return ImuStream(agent, sensor, clock, imu, stamps, reported["gyro"].astype(np.float32),
-                     reported["accel"].astype(np.float32), None)
+                     reported["accel"].astype(np.float32), None, warmup)
 
 
 def imu_triads(sensors: SensorParams) -> dict[str, Triad]:

@@ -56,6 +56,8 @@ def wheel_spin_rps(motion: Motion, agent: int, build: ChairBuild, side: int, par
 
     Slip (`wheels.slip_accel` / `slip_brake`): the wheel turns more than the ground travel while
     accelerating hard and less while braking hard, in proportion to the share of the limit used.
+    Scrub (`wheels.slip_turn`): in a pivot the wheels' differential rotation exceeds the chair's
+    yaw, in proportion to the share of the yaw-rate limit used.
     """
     chair, wheels = params.chair, params.wheels
     speed = motion.speed_mps[:, agent]
@@ -64,7 +66,11 @@ def wheel_spin_rps(motion: Motion, agent: int, build: ChairBuild, side: int, par
     driving = rolling_accel * np.sign(speed)
     slip = (1.0 + wheels.slip_accel * np.clip(driving / chair.accel_mps2, 0.0, 1.0)
             - wheels.slip_brake * np.clip(-driving / chair.brake_mps2, 0.0, 1.0))
-    contact_speed = speed - side * motion.yaw_roll_rps[:, agent] * chair.track_m / 2.0
+    yaw_roll = motion.yaw_roll_rps[:, agent]
+    if wheels.slip_turn > 0:
+        yaw_roll = yaw_roll * (1.0 + wheels.slip_turn * np.clip(np.abs(yaw_roll) / math.radians(chair.yaw_rate_max_dps),
+                                                                0.0, 1.0))
+    contact_speed = speed - side * yaw_roll * chair.track_m / 2.0
     diameter = build.left_diameter_m if side > 0 else build.right_diameter_m
     return contact_speed * slip / (diameter / 2.0)
 

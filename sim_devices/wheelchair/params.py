@@ -30,6 +30,12 @@ class CourtParams:
     beacon_height_m: float = _p(2.9, "m", 0.0, 10.0, "under the backboard, out of play (protocol.session.Beacon)")
     beacon_radius_m: float = _p(1.0, "m", 0.1, 10.0, "the paper's reception zone (its simulation, sec. 4.4.1)")
     beacon_tx_power_dbm: float = _p(-59.0, "dBm", -100.0, 10.0, "RSSI at 1 m, the iBeacon calibration figure")
+    listed_height_error_m: float = _p(0.0, "m", -10.0, 10.0,
+                                      "the venue file's beacon height minus the true one; a venue file copied "
+                                      "from another hall (issue 21: beacons on the floor or hung at 2-4 m)")
+    listed_tx_error_db: float = _p(0.0, "dB", -20.0, 20.0,
+                                   "the venue file's tx power minus the true one; iBeacon calibration is off "
+                                   "by up to +-6 dB between units and mountings (issue 21)")
 
 
 @dataclass(frozen=True)
@@ -88,6 +94,8 @@ class GameParams:
 
     possession_min_s: float = _p(10.0, "s", 1.0, 120.0, "possession length drawn in [min, max] (issue: 10-25 s)")
     possession_max_s: float = _p(25.0, "s", 1.0, 120.0, "see possession_min_s")
+    parked_start: int = _p(1, "0/1", 0, 1, "1: the game starts from rest (a tip-off, every chair still for a "
+                           "dead-ball length); 0: the edges start mid-play, as after a restart")
     stoppage_probability: float = _p(0.3, "1", 0.0, 1.0,
                                      "a dead ball (foul, out of bounds) after a possession; assumption")
     stoppage_min_s: float = _p(3.0, "s", 0.0, 60.0, "dead-ball length drawn in [min, max]; everyone "
@@ -126,6 +134,8 @@ class WheelParams:
     diameter_spread: float = _p(0.003, "1", 0.0, 0.1, "SD of that ratio per wheel; assumption")
     slip_accel: float = _p(0.02, "1", 0.0, 0.5, "extra wheel rotation at full acceleration; assumption, 1-3 %")
     slip_brake: float = _p(0.03, "1", 0.0, 0.5, "missing wheel rotation at full braking; assumption, 1-5 %")
+    slip_turn: float = _p(0.0, "1", 0.0, 0.5, "extra differential wheel rotation at the full yaw rate (tyre "
+                          "scrub in pivots); assumption, 0-5 %")
 
 
 @dataclass(frozen=True)
@@ -141,6 +151,11 @@ class SensorParams:
                               "ZRO tolerance +-5 deg/s untrimmed, assumption 0.5 after factory trim (0.1-5)")
     gyro_bias_walk_dps_per_sqrt_s: float = _p(0.002, "deg/s/sqrt(s)", 0.0, 1.0,
                                               "bias random walk; assumption, MEMS in-run instability 5-20 deg/h")
+    gyro_warmup_dps: float = _p(0.0, "deg/s", 0.0, 5.0,
+                                "SD per axis of the bias change while the sensor warms up after power-on; "
+                                "MPU-9250 ZRO over temperature +-30 deg/s over 125 degC (0.24 deg/s/degC), "
+                                "a few degC of warming; assumption, 0-0.5")
+    gyro_warmup_s: float = _p(300.0, "s", 1.0, 10_000.0, "time constant of that warm-up; assumption, 100-600 s")
     gyro_noise_dps_per_sqrt_hz: float = _p(0.01, "deg/s/sqrt(Hz)", 0.0, 1.0,
                                            "MPU-9250 rate noise density 0.01 (ICM-20948 0.015, BMI160 0.007)")
     gyro_scale_error: float = _p(0.01, "1", 0.0, 0.2, "SD per axis; MPU-9250 sensitivity tolerance +-3 %")
@@ -229,8 +244,10 @@ class SimParams:
 # Error sources an `error_free` run switches off (signal and motion stay as they are).
 _ERROR_FIELDS: dict[str, tuple[str, ...]] = {
     "magnetic": ("disturbance_ut", "hard_iron_ut", "soft_iron", "noise_ut"),
-    "wheels": ("diameter_bias", "diameter_spread", "slip_accel", "slip_brake"),
-    "sensors": ("gyro_bias_dps", "gyro_bias_walk_dps_per_sqrt_s", "gyro_noise_dps_per_sqrt_hz", "gyro_scale_error",
+    "court": ("listed_height_error_m", "listed_tx_error_db"),
+    "wheels": ("diameter_bias", "diameter_spread", "slip_accel", "slip_brake", "slip_turn"),
+    "sensors": ("gyro_bias_dps", "gyro_bias_walk_dps_per_sqrt_s", "gyro_warmup_dps", "gyro_noise_dps_per_sqrt_hz",
+                "gyro_scale_error",
                 "accel_bias_g", "accel_noise_g_per_sqrt_hz", "accel_scale_error", "misalignment_deg",
                 "vibration_g", "vibration_g_per_mps"),
     "impacts": ("noncontact_rate_per_min",),

@@ -87,13 +87,16 @@ class SimSummary:
 
 
 def simulate(players: int, duration_s: float, seed: int, output: Path, params: SimParams | None = None,
-             progress: Callable[[float], None] | None = None, camera: bool = False) -> SimSummary:
+             progress: Callable[[float], None] | None = None, camera: bool = False,
+             world: int = 0) -> SimSummary:
     """Simulate a wheelchair-basketball game and write its session log to `output`.
 
     ConfigError for a bad player count, duration or seed, or an output that cannot be written.
     `progress`, if given, is called with the completed share in [0, 1]. `camera` adds a simulated
     court tracker's anonymous tracks and their truth labels (sim_devices.camera, COURT preset, two
     referees); its draws come from a seed of their own, so the other streams are the same either way.
+    `world` only labels the session (source "world"): the world's figures are already in `params`
+    (sim_devices.wheelchair.worlds.world_params).
     """
     params = params or SimParams()
     _check(players, duration_s, seed)
@@ -110,7 +113,7 @@ def simulate(players: int, duration_s: float, seed: int, output: Path, params: S
     beacons = _beacon_sites(motion, params, radio_rng)
     streams = [s for i, b in enumerate(builds)
                for s in chair_streams(motion, i, b, field, impacts[i], params, agent_seeds[i])]
-    session = _describe(builds, motion, streams, params, seed, duration_s)
+    session = _describe(builds, motion, streams, params, seed, duration_s, world)
     camera_sources, camera_about = ([], None) if not camera else \
         _camera_items(motion, builds, params, root_seed.spawn(1)[0])
     if camera_about is not None:
@@ -170,10 +173,11 @@ def _beacon_sites(motion: Motion, params: SimParams, rng: np.random.Generator) -
 
 
 def _describe(builds: list[ChairBuild], motion: Motion, streams: list[ImuStream], params: SimParams, seed: int,
-              duration_s: float) -> Session:
+              duration_s: float, world: int) -> Session:
     court = params.court
-    beacons = tuple(Beacon(beacon_id, x, court.width_m / 2.0, court.beacon_radius_m, court.beacon_tx_power_dbm,
-                           court.beacon_height_m)
+    beacons = tuple(Beacon(beacon_id, x, court.width_m / 2.0, court.beacon_radius_m,
+                           court.beacon_tx_power_dbm + court.listed_tx_error_db,
+                           court.beacon_height_m + court.listed_height_error_m)
                     for beacon_id, x in (("goal-a", court.basket_inset_m),
                                          ("goal-b", court.length_m - court.basket_inset_m)))
     venue = Venue(VENUE, court.length_m, court.width_m, beacons)
@@ -193,8 +197,9 @@ def _describe(builds: list[ChairBuild], motion: Motion, streams: list[ImuStream]
              for i, b in enumerate(builds)}
     devices = {s.sensor_id: {"clock_offset_s": s.clock.offset_s, "clock_drift": s.clock.drift,
                              "gyro_bias_dps": s.imu.errors["gyro"].bias.tolist(),
+                             "gyro_warmup_dps": s.gyro_warmup_dps.tolist(),
                              "accel_bias_g": s.imu.errors["accel"].bias.tolist()} for s in streams}
-    source = {"generator": "sim_devices.wheelchair", "seed": seed, "players": len(builds),
+    source = {"generator": "sim_devices.wheelchair", "seed": seed, "world": world, "players": len(builds),
               "duration_s": float(duration_s), "params": dataclasses.asdict(params),
               "truth": {"chairs": truth, "devices": devices}}
     return Session(venue, tuple(agents), source)

@@ -47,7 +47,8 @@ class Tactics:
         inset = court.basket_inset_m
         self.baskets = np.array([[inset, court.width_m / 2], [court.length_m - inset, court.width_m / 2]])
         self.possession = int(rng.integers(2))
-        self.play_from_s = self._stoppage_length()  # the game starts from rest (a tip-off)
+        tip_off = self._stoppage_length()  # drawn either way, so the other draws do not depend on parked_start
+        self.play_from_s = tip_off if game.parked_start else 0.0
         self.possession_until_s = self.play_from_s + self._possession_length()
         self.marks = np.full(players, -1)
         self.spots = np.zeros((players, 2))
