@@ -11,13 +11,24 @@ seat-gyro scale error (1), magnetic north in the court frame (rad).
 - A lost seat packet would lose the turns made meanwhile (pivots run at 300+ deg/s): across a
   gap the heading change comes from the wheels' differential rotation, whose ratio to the seat
   gyro's turn is learned online (camber and track make it chair-specific).
-- The seat magnetometer is a gated, self-calibrating aid: the chair's hard iron is a fixed offset
-  in the chair frame, found by a running circle fit as the chair turns; once the fit is sound,
-  the field's angle around the circle centre is (north - heading), with north a state learned
-  from the known start heading. Updates are weak (building disturbance: ~10 deg) and
-  chi-square gated, so they bound the slow heading drift (gyro scale, residual bias) without
-  importing the disturbance. Tilt comes from gravity measured while still, never while moving
-  (a sprint's 2.5 m/s^2 would read as 14 deg of pitch).
+- The seat magnetometer is a self-calibrating aid that learns the hall it is in. The chair's hard
+  iron is a fixed offset in the chair frame, found by a running circle fit as the chair turns;
+  around its centre the field's angle is (north - heading). A building's disturbance is fixed in
+  space, about isotropic, and nobody knows it in advance (0-25 deg RMS, correlated over 1-10 m):
+  - its size is learned from the spread of the field's strength around the circle (a disturbance
+    that turns the field by a degrees changes its strength by as much), its correlation length
+    from how fast successive readings' strengths differ over the travel between them;
+  - the turn the field saw over `mag_turn_s` measures the gyro's bias and scale: over little
+    travel the disturbance hardly changes, so its change, 2 var (1 - exp(-d / L)), is the
+    noise; a pivot in place measures the scale exactly, however disturbed the hall;
+  - north - heading is measured once per correlation length of travel, not per second (a parked
+    chair repeats one disturbed reading), chi-square gated; north is learned from the known start
+    heading and re-learned after `mag_recover_rejections` rejections in a row;
+  - a hall more disturbed than `mag_trust_sd_deg` is trusted less than its spread says (chairs
+    keep to a few places, so its errors do not average out as independent readings would);
+  - every reading's variance includes the fitted centre's own uncertainty.
+  Tilt comes from gravity measured while still, never while moving (a sprint's 2.5 m/s^2 would
+  read as 14 deg of pitch).
 - Uncertainty grows with distance and rotation, not time; an impact adds a shove variance.
 
 `step(settings, state, sample) -> state` is pure; `start` makes the first state. dt comes from
@@ -35,6 +46,11 @@ import numpy as np
 DEG = math.pi / 180.0
 X, Y, HEADING, BIAS, SCALE, GYRO_SCALE, NORTH = range(7)
 N = 7
+# The magnetometer aid's learned statistics (MagAid.stats), running sums with forgetting: the
+# readings' weight; their squared relative strength residuals; successive residuals' squared
+# differences and the travel between them; the field strength; and the last residual.
+M_WEIGHT, M_RADIAL, M_DIFF, M_STEP, M_RADIUS, M_LAST = range(6)
+MAG_STATS = 6
 
 
 class Flag(enum.IntFlag):
@@ -73,9 +89,18 @@ class ChairSettings:
     wheel_turn_memory_s: float = 60.0  # forgetting time of the wheel-turn ratio estimate
     wheel_turn_sd: float = 0.1  # heading uncertainty per radian bridged by the wheels (skid)
     wheel_rate_limit_dps: float = 2000.0  # faster "rates" are a wheel catching up after lost packets
-    mag_period_s: float = 0.5  # one magnetometer update per this (disturbance is spatially correlated)
-    mag_heading_sd_deg: float = 12.0  # building disturbance (docs/simulator.md: ~9 deg RMS) + soft iron
-    mag_correlation_s: float = 5.0  # the disturbance changes over metres: samples closer in time repeat it
+    mag_period_s: float = 0.5  # the magnetometer is read this often (fit and disturbance statistics)
+    mag_heading_sd_deg: float = 12.0  # prior of the disturbance's heading SD, until the hall's is learned
+    mag_floor_sd_deg: float = 2.0  # never trusted closer than this (noise, soft-iron residual)
+    mag_level_weight: float = 20.0  # the prior counts as this many readings against the learned statistics
+    mag_level_memory: float = 200.0  # readings: forgetting of the learned disturbance statistics
+    mag_min_step_m: float = 0.3  # a reading counts for the statistics after this much travel (a still chair repeats one)
+    mag_correlation_prior_m: float = 2.0  # prior of the disturbance's correlation length
+    mag_correlation_max_m: float = 20.0  # and its bounds
+    mag_correlation_min_m: float = 0.5
+    mag_turn_s: float = 2.0  # the gyro is measured by the field's turn over this long
+    mag_turn_sd_deg: float = 1.5  # noise of a turn the field saw (two readings, the fit's centre error)
+    mag_trust_sd_deg: float = 5.0  # beyond this disturbance a reading's variance grows with its square (worlds 1-10: 5, 8, 12)
     mag_gate_chi2: float = 6.63  # 99 % for 1 dof
     mag_fit_memory_s: float = 300.0  # forgetting time of the hard-iron circle fit
     mag_fit_min_spread: float = 0.5  # the fit is trusted once field angles spread this well (0..1)
@@ -101,13 +126,20 @@ class ChairSample:
 
 @dataclass(frozen=True)
 class MagAid:
-    """The magnetometer aid's own state: hard-iron fit and bookkeeping (fixed size)."""
+    """The magnetometer aid's own state: hard-iron fit, the hall's learned disturbance, bookkeeping (fixed size)."""
 
     fit: np.ndarray  # (4, 4) running moments [x, y, 1, x^2 + y^2] of the levelled field
-    due_s: float  # time until the next update
+    due_s: float  # time until the next reading
     ready: bool  # north has been initialised from the fit
     rejections: int  # consecutive gate rejections
     innovation_deg: float  # last residual (diagnostic)
+    stats: np.ndarray  # (MAG_STATS,) the hall's disturbance as learned so far
+    since_read_m: float  # travel since the last reading that counted for `stats`
+    since_update_m: float  # travel since the last heading correction (or north learned)
+    anchor_angle: float  # field angle (north - heading) at the start of the turn being measured; NaN: none
+    turn_gyro_rad: float  # raw seat-gyro turn since then (trapezoid, before bias and scale)
+    turn_s: float  # and the time
+    turn_m: float  # and the travel
 
 
 @dataclass(frozen=True)
@@ -148,7 +180,8 @@ def start(settings: ChairSettings, sample: ChairSample, x_m: float, y_m: float, 
     return ChairState(sample.time_ns, np.array([x_m, y_m, heading_rad, 0.0, 1.0, 0.0, 0.0]), cov,
                       sample.yaw_rate_dps, 0.0, 0.0, 0.0, norm, tuple(a / norm for a in sample.accel_g), Flag.NONE,
                       False, 0.0, wheel_turn_ratio_prior(settings) * prior_weight, prior_weight,
-                      MagAid(np.zeros((4, 4)), 0.0, False, 0, 0.0))
+                      MagAid(np.zeros((4, 4)), 0.0, False, 0, 0.0, np.zeros(MAG_STATS), 0.0, 0.0, math.nan, 0.0, 0.0,
+                             0.0))
 
 
 def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> ChairState:
@@ -214,44 +247,149 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
         new_mean, new_cov = _scalar_update(new_mean, new_cov, BIAS, 1.0, sample.yaw_rate_dps * DEG - new_mean[BIAS],
                                            (settings.still_rate_sd_dps * DEG) ** 2)
 
-    mag, new_mean, new_cov, mag_flags = _magnetometer(settings, state.mag, sample, gravity, new_mean, new_cov, dt)
+    raw_turn = math.nan if flags & Flag.GAP else 0.5 * (state.yaw_rate_dps + sample.yaw_rate_dps) * DEG * dt
+    mag, new_mean, new_cov, mag_flags = _magnetometer(settings, state.mag, sample, gravity, new_mean, new_cov, dt,
+                                                      abs(travel), raw_turn)
     return ChairState(sample.time_ns, new_mean, new_cov, sample.yaw_rate_dps, left_bias, right_bias, still_s,
                       accel_mean, gravity, flags | mag_flags, in_impact, state.travel_m + abs(travel), turn_xy,
                       turn_xy_weight, mag)
 
 
 def _magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, gravity: tuple[float, float, float],
-                  mean: np.ndarray, cov: np.ndarray, dt: float) -> tuple[MagAid, np.ndarray, np.ndarray, Flag]:
-    """Every `mag_period_s`: extend the hard-iron fit, then learn north or correct the heading."""
+                  mean: np.ndarray, cov: np.ndarray, dt: float, travel_m: float, raw_turn_rad: float
+                  ) -> tuple[MagAid, np.ndarray, np.ndarray, Flag]:
+    """Every `mag_period_s`: extend the hard-iron fit and the hall's statistics; measure the gyro by the
+    turn the field saw; learn north, or correct the heading once the chair has moved a correlation
+    length since the last correction. `raw_turn_rad` is the seat gyro's raw turn this step (NaN in a gap)."""
     due = mag.due_s - dt
+    since_read, since_update = mag.since_read_m + travel_m, mag.since_update_m + travel_m
+    turn_gyro, turn_s, turn_m = mag.turn_gyro_rad + raw_turn_rad, mag.turn_s + dt, mag.turn_m + travel_m
     if sample.mag_gauss is None or due > 0.0:
-        return replace(mag, due_s=due), mean, cov, Flag.NONE
+        return replace(mag, due_s=due, since_read_m=since_read, since_update_m=since_update, turn_gyro_rad=turn_gyro,
+                       turn_s=turn_s, turn_m=turn_m), mean, cov, Flag.NONE
     horizontal = _level(sample.mag_gauss, gravity)
     fit = _fit_add(mag.fit, horizontal, math.exp(-settings.mag_period_s / settings.mag_fit_memory_s))
-    mag = replace(mag, fit=fit, due_s=settings.mag_period_s)
+    mag = replace(mag, fit=fit, due_s=settings.mag_period_s, since_read_m=since_read, since_update_m=since_update,
+                  turn_gyro_rad=turn_gyro, turn_s=turn_s, turn_m=turn_m)
     centre = _fit_centre(fit, settings.mag_fit_min_spread, settings.mag_fit_min_points)
     if centre is None:
         return mag, mean, cov, Flag.NONE
-    angle = math.atan2(horizontal[1] - centre[1], horizontal[0] - centre[0])  # = north - heading
+    east, north_part = horizontal[0] - centre[0], horizontal[1] - centre[1]
+    angle = math.atan2(north_part, east)  # = north - heading
+    radius = math.sqrt(east * east + north_part * north_part)
+    if since_read >= settings.mag_min_step_m:
+        mag = replace(mag, stats=_learn_disturbance(settings, mag.stats, radius, since_read), since_read_m=0.0)
+    variance, correlation_m = mag_disturbance(settings, mag.stats)
+    centre_spread = _centre_spread(fit, radius, variance)
+    flags = Flag.NONE
+    if not math.isfinite(mag.anchor_angle) or not math.isfinite(turn_gyro):
+        mag = replace(mag, anchor_angle=angle, turn_gyro_rad=0.0, turn_s=0.0, turn_m=0.0)
+    elif turn_s >= settings.mag_turn_s:
+        mean, cov, flags = _turn_update(settings, mag, angle, mean, cov, variance, correlation_m, centre_spread)
+        mag = replace(mag, anchor_angle=angle, turn_gyro_rad=0.0, turn_s=0.0, turn_m=0.0)
     if not mag.ready or mag.rejections >= settings.mag_recover_rejections:
         # (re)learn north = angle + heading: it inherits the heading's error and all its correlations
         mean, cov = mean.copy(), cov.copy()
         mean[NORTH] = angle + mean[HEADING]
         cov[NORTH, :] = cov[HEADING, :]
         cov[:, NORTH] = cov[:, HEADING]
-        cov[NORTH, NORTH] = cov[HEADING, HEADING] + (settings.mag_heading_sd_deg * DEG) ** 2
-        return replace(mag, ready=True, rejections=0), mean, cov, Flag.NONE
+        cov[NORTH, NORTH] = cov[HEADING, HEADING] + variance
+        return replace(mag, ready=True, rejections=0, since_update_m=0.0), mean, cov, flags
+    if since_update < correlation_m:  # the same stretch of disturbed field: nothing new about the heading
+        return mag, mean, cov, flags
     innovation = _wrap(angle - (mean[NORTH] - mean[HEADING]))
     h = np.zeros(N)
     h[NORTH], h[HEADING] = 1.0, -1.0
-    # updates every mag_period_s share one disturbance for ~mag_correlation_s: de-weight them
-    repeat = max(settings.mag_correlation_s / settings.mag_period_s, 1.0)
-    variance = float(h @ cov @ h) + repeat * (settings.mag_heading_sd_deg * DEG) ** 2
-    mag = replace(mag, innovation_deg=innovation / DEG)
-    if innovation * innovation / variance > settings.mag_gate_chi2:
-        return replace(mag, rejections=mag.rejections + 1), mean, cov, Flag.MAG_REJECTED
-    gain = cov @ h / variance
-    return replace(mag, rejections=0), mean + gain * innovation, cov - np.outer(gain, h @ cov), Flag.MAG_USED
+    total = float(h @ cov @ h) + variance + _across(centre_spread, -math.sin(angle), math.cos(angle))
+    mag = replace(mag, innovation_deg=innovation / DEG, since_update_m=0.0)
+    if innovation * innovation / total > settings.mag_gate_chi2:
+        return replace(mag, rejections=mag.rejections + 1), mean, cov, flags | Flag.MAG_REJECTED
+    gain = cov @ h / total
+    return replace(mag, rejections=0), mean + gain * innovation, cov - np.outer(gain, h @ cov), flags | Flag.MAG_USED
+
+
+def _turn_update(settings: ChairSettings, mag: MagAid, angle: float, mean: np.ndarray, cov: np.ndarray,
+                 variance: float, correlation_m: float, centre_spread: tuple[float, float, float]
+                 ) -> tuple[np.ndarray, np.ndarray, Flag]:
+    """The gyro's bias and scale from the turn the field saw since the anchor reading.
+
+    The disturbance is the hall's, fixed in space: over little travel it hardly changes, so the
+    field turns by exactly the chair's turn, however disturbed it is (a pivot measures the gyro's
+    scale, a slow stretch its bias). Its change over `turn_m` of travel, 2 var (1 - exp(-d / L)),
+    is the measurement's noise."""
+    scale, bias = 1.0 + mean[GYRO_SCALE], mean[BIAS]
+    predicted = scale * (mag.turn_gyro_rad - bias * mag.turn_s)
+    seen = predicted + _wrap(-(angle - mag.anchor_angle) - predicted)  # unwrapped near the gyro's turn
+    noise = (2.0 * variance * (1.0 - math.exp(-mag.turn_m / correlation_m)) + (settings.mag_turn_sd_deg * DEG) ** 2
+             + _across(centre_spread, math.sin(mag.anchor_angle) - math.sin(angle),
+                       math.cos(angle) - math.cos(mag.anchor_angle)))
+    h_bias, h_scale = -scale * mag.turn_s, mag.turn_gyro_rad - bias * mag.turn_s  # d predicted / d state
+    innovation = seen - predicted
+    row = h_bias * cov[BIAS] + h_scale * cov[GYRO_SCALE]  # h P
+    total = (h_bias * row[BIAS] + h_scale * row[GYRO_SCALE]) + noise
+    if innovation * innovation / total > settings.mag_gate_chi2:
+        return mean, cov, Flag.MAG_REJECTED
+    gain = (h_bias * cov[:, BIAS] + h_scale * cov[:, GYRO_SCALE]) / total  # P h / total
+    return mean + gain * innovation, cov - np.outer(gain, row), Flag.MAG_USED
+
+
+def _centre_spread(fit: np.ndarray, radius: float, variance: float) -> tuple[float, float, float]:
+    """(xx, xy, yy) covariance of the fitted circle's centre over its radius squared (rad^2).
+
+    The algebraic residual of a reading a relative distance e off the circle is 2 r^2 e, so the
+    least-squares centre has covariance r^2 var(e) S^-1 / w, S the readings' scatter and w their
+    weight: 2 var(e) / w on a full circle, more on a short arc."""
+    w = fit[2, 2]
+    mean_x, mean_y = fit[0, 2] / w, fit[1, 2] / w
+    sxx, sxy, syy = fit[0, 0] / w - mean_x * mean_x, fit[1, 0] / w - mean_y * mean_x, fit[1, 1] / w - mean_y * mean_y
+    scale = radius * radius * variance / (w * (sxx * syy - sxy * sxy))
+    return scale * syy, -scale * sxy, scale * sxx
+
+
+def _across(spread: tuple[float, float, float], nx: float, ny: float) -> float:
+    """The variance (rad^2) a centre of covariance `spread` adds to a field angle along (nx, ny)."""
+    return spread[0] * nx * nx + 2.0 * spread[1] * nx * ny + spread[2] * ny * ny
+
+
+def _learn_disturbance(settings: ChairSettings, stats: np.ndarray, radius: float, step_m: float) -> np.ndarray:
+    """The statistics after one more reading `step_m` from the last: a field of radius `radius` around the fit's centre.
+
+    A disturbance of the same size along and across the field (a building's is about isotropic)
+    changes the field's strength by as much, relative to it, as it turns it: the spread of the
+    strength measures the heading disturbance without knowing the heading. How fast successive
+    readings' strengths differ over the travel between them gives its correlation length."""
+    out = stats.copy()
+    forget = 1.0 - 1.0 / settings.mag_level_memory
+    radius_mean = out[M_RADIUS] / out[M_WEIGHT] if out[M_WEIGHT] > 0.0 else radius
+    residual = (radius - radius_mean) / radius_mean
+    if out[M_WEIGHT] > 0.0:
+        out[M_DIFF] = forget * out[M_DIFF] + (residual - out[M_LAST]) ** 2
+        out[M_STEP] = forget * out[M_STEP] + step_m
+    out[M_RADIAL] = forget * out[M_RADIAL] + residual * residual
+    out[M_RADIUS] = forget * out[M_RADIUS] + radius
+    out[M_WEIGHT] = forget * out[M_WEIGHT] + 1.0
+    out[M_LAST] = residual
+    return out
+
+
+def mag_disturbance(settings: ChairSettings, stats: np.ndarray) -> tuple[float, float]:
+    """(heading variance rad^2, correlation length m) of the hall's field: learned, blended with the priors."""
+    prior_weight, weight = settings.mag_level_weight, stats[M_WEIGHT]
+    prior_var = (settings.mag_heading_sd_deg * DEG) ** 2
+    variance = max((stats[M_RADIAL] + prior_weight * prior_var) / (weight + prior_weight),
+                   (settings.mag_floor_sd_deg * DEG) ** 2)
+    # a strongly disturbed hall is trusted less than its spread says: chairs keep to a few places,
+    # so its errors do not average out as independent readings would
+    variance *= max(1.0, variance / (settings.mag_trust_sd_deg * DEG) ** 2)
+    correlation = settings.mag_correlation_prior_m
+    if weight > 1.0 and stats[M_RADIAL] > 0.0:
+        ratio = 0.5 * (stats[M_DIFF] / stats[M_RADIAL])  # 1 - exp(-step / L), exponential correlation
+        step = stats[M_STEP] / weight
+        learned = settings.mag_correlation_max_m if ratio <= 0.0 else (
+            settings.mag_correlation_min_m if ratio >= 1.0 else -step / math.log(1.0 - ratio))
+        learned = min(max(learned, settings.mag_correlation_min_m), settings.mag_correlation_max_m)
+        correlation = (weight * learned + prior_weight * correlation) / (weight + prior_weight)
+    return variance, correlation
 
 
 def position_update(state: ChairState, measured_xy: np.ndarray, covariance: np.ndarray,

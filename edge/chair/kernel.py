@@ -35,8 +35,9 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-from edge.chair.estimator import (BIAS, DEG, GYRO_SCALE, HEADING, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings,
-                                  ChairState, Flag, MagAid)
+from edge.chair.estimator import (BIAS, DEG, GYRO_SCALE, HEADING, M_DIFF, M_LAST, M_RADIAL, M_RADIUS, M_STEP,
+                                  M_WEIGHT, MAG_STATS, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState,
+                                  Flag, MagAid)
 
 # --- state vector --------------------------------------------------------------------------
 TIME_HIGH = 0  # time_ns >> 32 and time_ns & 0xFFFFFFFF: each exact in a float64, the whole is not
@@ -59,15 +60,23 @@ MAG_DUE = MAG_FIT + 16
 MAG_READY = MAG_DUE + 1  # 0 or 1
 MAG_REJECTIONS = MAG_READY + 1
 MAG_INNOVATION = MAG_REJECTIONS + 1
-STATE_SIZE = MAG_INNOVATION + 1
+MAG_STATS_AT = MAG_INNOVATION + 1  # MAG_STATS values, MagAid.stats
+MAG_SINCE_READ = MAG_STATS_AT + MAG_STATS
+MAG_SINCE_UPDATE = MAG_SINCE_READ + 1
+MAG_ANCHOR = MAG_SINCE_UPDATE + 1
+MAG_TURN_GYRO = MAG_ANCHOR + 1
+MAG_TURN_S = MAG_TURN_GYRO + 1
+MAG_TURN_M = MAG_TURN_S + 1
+STATE_SIZE = MAG_TURN_M + 1
 
 # --- settings vector -----------------------------------------------------------------------
 (S_GAP, S_ACCEL_MEAN_TIME, S_STILL_WHEEL, S_STILL_GYRO, S_STILL_ACCEL, S_STILL_TIME, S_HALF_CIRCUMFERENCE,
  S_WHEEL_BIAS_TIME, S_WHEEL_TURN_SD, S_GYRO_NOISE_VAR, S_WHEEL_RATE_LIMIT, S_WHEEL_TURN_MEMORY, S_IMPACT_G,
  S_ALONG_SD, S_ACROSS_SD, S_SHOVE_VAR, S_BIAS_WALK_VAR, S_SCALE_WALK_VAR, S_STILL_RATE_VAR, S_MAG_PERIOD,
- S_MAG_FIT_FORGET, S_MAG_MIN_SPREAD_SQ, S_MAG_MIN_POINTS, S_MAG_HEADING_VAR, S_MAG_UPDATE_VAR, S_MAG_GATE_CHI2,
- S_MAG_RECOVER_REJECTIONS) = range(27)
-SETTINGS_SIZE = S_MAG_RECOVER_REJECTIONS + 1
+ S_MAG_FIT_FORGET, S_MAG_MIN_SPREAD_SQ, S_MAG_MIN_POINTS, S_MAG_HEADING_VAR, S_MAG_GATE_CHI2,
+ S_MAG_RECOVER_REJECTIONS, S_MAG_FLOOR_VAR, S_MAG_LEVEL_WEIGHT, S_MAG_FORGET, S_MAG_MIN_STEP, S_MAG_CORRELATION_PRIOR,
+ S_MAG_CORRELATION_MAX, S_MAG_CORRELATION_MIN, S_MAG_TRUST_VAR, S_MAG_TURN_S, S_MAG_TURN_VAR) = range(36)
+SETTINGS_SIZE = S_MAG_TURN_VAR + 1
 
 # --- sample rows ---------------------------------------------------------------------------
 V_YAW_RATE, V_LEFT, V_RIGHT, V_ACCEL, V_MAG, V_HAS_MAG = 0, 1, 2, 3, 6, 9  # accel and mag: 3 values each
@@ -109,9 +118,18 @@ def pack_settings(settings: ChairSettings) -> np.ndarray:
     vector[S_MAG_MIN_SPREAD_SQ] = s.mag_fit_min_spread**2
     vector[S_MAG_MIN_POINTS] = s.mag_fit_min_points
     vector[S_MAG_HEADING_VAR] = (s.mag_heading_sd_deg * DEG) ** 2
-    vector[S_MAG_UPDATE_VAR] = max(s.mag_correlation_s / s.mag_period_s, 1.0) * (s.mag_heading_sd_deg * DEG) ** 2
     vector[S_MAG_GATE_CHI2] = s.mag_gate_chi2
     vector[S_MAG_RECOVER_REJECTIONS] = s.mag_recover_rejections
+    vector[S_MAG_FLOOR_VAR] = (s.mag_floor_sd_deg * DEG) ** 2
+    vector[S_MAG_LEVEL_WEIGHT] = s.mag_level_weight
+    vector[S_MAG_FORGET] = 1.0 - 1.0 / s.mag_level_memory
+    vector[S_MAG_MIN_STEP] = s.mag_min_step_m
+    vector[S_MAG_CORRELATION_PRIOR] = s.mag_correlation_prior_m
+    vector[S_MAG_CORRELATION_MAX] = s.mag_correlation_max_m
+    vector[S_MAG_CORRELATION_MIN] = s.mag_correlation_min_m
+    vector[S_MAG_TRUST_VAR] = (s.mag_trust_sd_deg * DEG) ** 2
+    vector[S_MAG_TURN_S] = s.mag_turn_s
+    vector[S_MAG_TURN_VAR] = (s.mag_turn_sd_deg * DEG) ** 2
     return vector
 
 
@@ -135,6 +153,10 @@ def pack_state(state: ChairState) -> np.ndarray:
     vector[MAG_READY] = state.mag.ready
     vector[MAG_REJECTIONS] = state.mag.rejections
     vector[MAG_INNOVATION] = state.mag.innovation_deg
+    vector[MAG_STATS_AT:MAG_STATS_AT + MAG_STATS] = state.mag.stats
+    vector[MAG_SINCE_READ], vector[MAG_SINCE_UPDATE] = state.mag.since_read_m, state.mag.since_update_m
+    vector[MAG_ANCHOR], vector[MAG_TURN_GYRO] = state.mag.anchor_angle, state.mag.turn_gyro_rad
+    vector[MAG_TURN_S], vector[MAG_TURN_M] = state.mag.turn_s, state.mag.turn_m
     return vector
 
 
@@ -143,7 +165,9 @@ def unpack_state(vector: np.ndarray) -> ChairState:
         raise ValueError(f"a packed chair state has {STATE_SIZE} values, not shape {vector.shape}")
     v = vector
     mag = MagAid(v[MAG_FIT:MAG_FIT + 16].reshape(4, 4).copy(), float(v[MAG_DUE]), bool(v[MAG_READY]),
-                 int(v[MAG_REJECTIONS]), float(v[MAG_INNOVATION]))
+                 int(v[MAG_REJECTIONS]), float(v[MAG_INNOVATION]), v[MAG_STATS_AT:MAG_STATS_AT + MAG_STATS].copy(),
+                 float(v[MAG_SINCE_READ]), float(v[MAG_SINCE_UPDATE]), float(v[MAG_ANCHOR]), float(v[MAG_TURN_GYRO]),
+                 float(v[MAG_TURN_S]), float(v[MAG_TURN_M]))
     return ChairState(_time_ns(v), v[MEAN:MEAN + N].copy(), v[COV:COV + N * N].reshape(N, N).copy(),
                       float(v[YAW_RATE]), float(v[LEFT_BIAS]), float(v[RIGHT_BIAS]), float(v[STILL_S]),
                       float(v[ACCEL_MEAN]), tuple(float(g) for g in v[GRAVITY:GRAVITY + 3]), Flag(int(v[FLAGS])),
@@ -292,7 +316,13 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
         flags |= STILL
         _bias_update(mean, cov, work, yaw_rate * DEG - mean[BIAS], s[S_STILL_RATE_VAR])
 
-    due = st[MAG_DUE] - dt  # the magnetometer aid updates once every mag period
+    # the magnetometer aid reads once every mag period; travel and the gyro's turn add up meanwhile
+    st[MAG_SINCE_READ] += abs(travel)
+    st[MAG_SINCE_UPDATE] += abs(travel)
+    st[MAG_TURN_GYRO] += math.nan if flags & GAP else 0.5 * (st[YAW_RATE] + yaw_rate) * DEG * dt
+    st[MAG_TURN_S] += dt
+    st[MAG_TURN_M] += abs(travel)
+    due = st[MAG_DUE] - dt
     if sample[V_HAS_MAG] == 0.0 or due > 0.0:
         st[MAG_DUE] = due
     else:
@@ -371,14 +401,29 @@ def _bias_update(mean, cov, work, innovation, noise_var):
 
 @njit(cache=True, inline='always')
 def _magnetometer(s, st, mean, cov, fit, work, sample):
-    """A due magnetometer sample: extend the hard-iron fit, then learn north or correct the heading."""
+    """A due reading: extend the hard-iron fit and the hall's statistics, measure the gyro by the
+    field's turn, then learn north or correct the heading (the reference's `_magnetometer`)."""
     forward, left = _level(sample, st)
     _fit_add(fit, forward, left, s[S_MAG_FIT_FORGET])
     st[MAG_DUE] = s[S_MAG_PERIOD]
     found, centre_x, centre_y = _fit_centre(fit, work[W_LU:W_LU + 3], s[S_MAG_MIN_SPREAD_SQ], s[S_MAG_MIN_POINTS])
     if not found:
         return 0
-    angle = math.atan2(left - centre_y, forward - centre_x)  # = north - heading
+    east, north_part = forward - centre_x, left - centre_y
+    angle = math.atan2(north_part, east)  # = north - heading
+    radius = math.sqrt(east * east + north_part * north_part)
+    stats = st[MAG_STATS_AT:MAG_STATS_AT + MAG_STATS]
+    if st[MAG_SINCE_READ] >= s[S_MAG_MIN_STEP]:
+        _learn_disturbance(s, stats, radius, st[MAG_SINCE_READ])
+        st[MAG_SINCE_READ] = 0.0
+    variance, correlation_m = _mag_disturbance(s, stats)
+    spread_xx, spread_xy, spread_yy = _centre_spread(fit, radius, variance)
+    flags = 0
+    if not math.isfinite(st[MAG_ANCHOR]) or not math.isfinite(st[MAG_TURN_GYRO]):
+        _reset_turn(st, angle)
+    elif st[MAG_TURN_S] >= s[S_MAG_TURN_S]:
+        flags = _turn_update(s, st, mean, cov, work, angle, variance, correlation_m, spread_xx, spread_xy, spread_yy)
+        _reset_turn(st, angle)
     if st[MAG_READY] == 0.0 or st[MAG_REJECTIONS] >= s[S_MAG_RECOVER_REJECTIONS]:
         # (re)learn north = angle + heading: it inherits the heading's error and all its correlations
         mean[NORTH] = angle + mean[HEADING]
@@ -386,28 +431,120 @@ def _magnetometer(s, st, mean, cov, fit, work, sample):
             cov[NORTH, j] = cov[HEADING, j]
         for i in range(N):
             cov[i, NORTH] = cov[i, HEADING]
-        cov[NORTH, NORTH] = cov[HEADING, HEADING] + s[S_MAG_HEADING_VAR]
+        cov[NORTH, NORTH] = cov[HEADING, HEADING] + variance
         st[MAG_READY] = 1.0
         st[MAG_REJECTIONS] = 0.0
-        return 0
+        st[MAG_SINCE_UPDATE] = 0.0
+        return flags
+    if st[MAG_SINCE_UPDATE] < correlation_m:  # the same stretch of disturbed field
+        return flags
     innovation = _wrap(angle - (mean[NORTH] - mean[HEADING]))
     # h = e_NORTH - e_HEADING: every product with h is one exact subtraction, as in numpy
     gain, row = work[W_GAIN], work[W_ROW]
     for j in range(N):
         row[j] = cov[NORTH, j] - cov[HEADING, j]  # h P
-    variance = (row[NORTH] - row[HEADING]) + s[S_MAG_UPDATE_VAR]
+    total = ((row[NORTH] - row[HEADING]) + variance
+             + _across(spread_xx, spread_xy, spread_yy, -math.sin(angle), math.cos(angle)))
     st[MAG_INNOVATION] = innovation / DEG
-    if innovation * innovation / variance > s[S_MAG_GATE_CHI2]:
+    st[MAG_SINCE_UPDATE] = 0.0
+    if innovation * innovation / total > s[S_MAG_GATE_CHI2]:
         st[MAG_REJECTIONS] += 1.0
-        return MAG_REJECTED
+        return flags | MAG_REJECTED
     for i in range(N):
-        gain[i] = (cov[i, NORTH] - cov[i, HEADING]) / variance
+        gain[i] = (cov[i, NORTH] - cov[i, HEADING]) / total
     for i in range(N):
         mean[i] += gain[i] * innovation
         for j in range(N):
             cov[i, j] -= gain[i] * row[j]
     st[MAG_REJECTIONS] = 0.0
+    return flags | MAG_USED
+
+
+@njit(cache=True, inline='always')
+def _reset_turn(st, angle):
+    st[MAG_ANCHOR] = angle
+    st[MAG_TURN_GYRO] = 0.0
+    st[MAG_TURN_S] = 0.0
+    st[MAG_TURN_M] = 0.0
+
+
+@njit(cache=True)
+def _turn_update(s, st, mean, cov, work, angle, variance, correlation_m, spread_xx, spread_xy, spread_yy):
+    """The reference's `_turn_update`: the gyro's bias and scale from the field's turn since the anchor."""
+    anchor, turn_gyro, turn_s = st[MAG_ANCHOR], st[MAG_TURN_GYRO], st[MAG_TURN_S]
+    scale, bias = 1.0 + mean[GYRO_SCALE], mean[BIAS]
+    predicted = scale * (turn_gyro - bias * turn_s)
+    seen = predicted + _wrap(-(angle - anchor) - predicted)
+    noise = (2.0 * variance * (1.0 - math.exp(-st[MAG_TURN_M] / correlation_m)) + s[S_MAG_TURN_VAR]
+             + _across(spread_xx, spread_xy, spread_yy, math.sin(anchor) - math.sin(angle),
+                       math.cos(angle) - math.cos(anchor)))
+    h_bias, h_scale = -scale * turn_s, turn_gyro - bias * turn_s
+    innovation = seen - predicted
+    gain, row = work[W_GAIN], work[W_ROW]
+    for j in range(N):
+        row[j] = h_bias * cov[BIAS, j] + h_scale * cov[GYRO_SCALE, j]
+    total = (h_bias * row[BIAS] + h_scale * row[GYRO_SCALE]) + noise
+    if innovation * innovation / total > s[S_MAG_GATE_CHI2]:
+        return MAG_REJECTED
+    for i in range(N):
+        gain[i] = (h_bias * cov[i, BIAS] + h_scale * cov[i, GYRO_SCALE]) / total
+    for i in range(N):
+        mean[i] += gain[i] * innovation
+        for j in range(N):
+            cov[i, j] -= gain[i] * row[j]
     return MAG_USED
+
+
+@njit(cache=True)
+def _centre_spread(fit, radius, variance):
+    """The reference's `_centre_spread`."""
+    w = fit[2, 2]
+    mean_x, mean_y = fit[0, 2] / w, fit[1, 2] / w
+    sxx, sxy, syy = fit[0, 0] / w - mean_x * mean_x, fit[1, 0] / w - mean_y * mean_x, fit[1, 1] / w - mean_y * mean_y
+    scale = radius * radius * variance / (w * (sxx * syy - sxy * sxy))
+    return scale * syy, -scale * sxy, scale * sxx
+
+
+@njit(cache=True, inline='always')
+def _across(xx, xy, yy, nx, ny):
+    return xx * nx * nx + 2.0 * xy * nx * ny + yy * ny * ny
+
+
+@njit(cache=True)
+def _learn_disturbance(s, stats, radius, step_m):
+    """The reference's `_learn_disturbance`, in place."""
+    forget = s[S_MAG_FORGET]
+    radius_mean = stats[M_RADIUS] / stats[M_WEIGHT] if stats[M_WEIGHT] > 0.0 else radius
+    residual = (radius - radius_mean) / radius_mean
+    if stats[M_WEIGHT] > 0.0:
+        stats[M_DIFF] = forget * stats[M_DIFF] + _pow2(residual - stats[M_LAST])
+        stats[M_STEP] = forget * stats[M_STEP] + step_m
+    stats[M_RADIAL] = forget * stats[M_RADIAL] + residual * residual
+    stats[M_RADIUS] = forget * stats[M_RADIUS] + radius
+    stats[M_WEIGHT] = forget * stats[M_WEIGHT] + 1.0
+    stats[M_LAST] = residual
+
+
+@njit(cache=True)
+def _mag_disturbance(s, stats):
+    """The reference's `mag_disturbance`: (heading variance, correlation length)."""
+    prior_weight, weight = s[S_MAG_LEVEL_WEIGHT], stats[M_WEIGHT]
+    variance = max((stats[M_RADIAL] + prior_weight * s[S_MAG_HEADING_VAR]) / (weight + prior_weight),
+                   s[S_MAG_FLOOR_VAR])
+    variance *= max(1.0, variance / s[S_MAG_TRUST_VAR])
+    correlation = s[S_MAG_CORRELATION_PRIOR]
+    if weight > 1.0 and stats[M_RADIAL] > 0.0:
+        ratio = 0.5 * (stats[M_DIFF] / stats[M_RADIAL])
+        step = stats[M_STEP] / weight
+        if ratio <= 0.0:
+            learned = s[S_MAG_CORRELATION_MAX]
+        elif ratio >= 1.0:
+            learned = s[S_MAG_CORRELATION_MIN]
+        else:
+            learned = -step / math.log(1.0 - ratio)
+        learned = min(max(learned, s[S_MAG_CORRELATION_MIN]), s[S_MAG_CORRELATION_MAX])
+        correlation = (weight * learned + prior_weight * correlation) / (weight + prior_weight)
+    return variance, correlation
 
 
 @njit(cache=True, inline='always')

@@ -1,9 +1,10 @@
 """Our hub's corrections for chairs: beacon closest approach and contacts as relative constraints.
 
 Pure functions over `edge.chair.estimator.ChairState`; the hub (or `reckon eval`) decides when.
-- A beacon is a *zone*, not a range: RSSI ranging is poor (path-loss exponent 1.8-4.3 in one
-  building, body loss 3-5 dB; algorithms.md). A pass near the goal gives one fix at the moment of
-  the strongest sighting, with an uncertainty that grows with the distance that RSSI suggests.
+- A beacon is a closest approach, not a range: RSSI ranging is poor (path-loss exponent 1.8-4.3
+  in one building, body loss 3-5 dB; algorithms.md), and the venue file's figures may be wrong. A
+  pass that peaks near the beacon's learned level gives one fix at the moment of its strongest
+  sighting, as uncertain as that beacon's fixes have turned out to be (`BeaconLevels`).
 - A contact says the two chairs were about a chair-width apart (centres ~0.9 m), not on one
   point as the paper's eq. 8 has it: a range constraint on both, chi-square gated.
 """
@@ -11,7 +12,8 @@ Pure functions over `edge.chair.estimator.ChairState`; the hub (or `reckon eval`
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from collections import deque
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -21,28 +23,133 @@ from protocol.session import Beacon
 PATH_LOSS_EXPONENT = 2.0  # free space; the hub cannot know the hall's
 RECEIVER_HEIGHT_M = 0.5
 BEACON_BASE_SD_M = 2.0  # a pass peak is 4-8 dB above the mean (shadowing 4 dB, fading 2 dB): metres, not a zone
-BEACON_MAX_HORIZONTAL_M = 2.5  # weaker peaks say too little to be worth a fix
-CONTACT_DISTANCE_M = 0.9  # two chair discs of ~0.45 m radius touching
+BEACON_MAX_HORIZONTAL_M = 2.5  # weaker peaks (by the venue file's figures) say too little to be worth a fix
+PASS_FLOOR_DBM = -72.0  # sightings above this (about 4 m from a goal, by the venue file) belong to a pass
+CLOSE_M = 1.0  # a close pass: within about a metre of the spot under the beacon
+LEVEL_PASSES = 16  # pass peaks kept per beacon (every chair's): its level is the second strongest
+MIN_PASSES = 3  # until then, the venue file's level at CLOSE_M in free space
+PASS_DB = 12.0  # ... and so do sightings this far below the learned level (a hall quieter than its file)
+ACCEPT_DB = 3.0  # a pass peaking this close to the level was a close one
+FIX_PRIOR_SD_M = 1.5  # a close pass's distance from the beacon, until the beacon's own are learned
+FIX_PRIOR_WEIGHT = 3.0  # the prior counts as this many fixes
+FIX_MEMORY = 30.0  # fixes: forgetting of the learned spread
+FIX_CLIP_M = 8.0  # a fix's innovation counts for the spread up to this
+CONTACT_DISTANCE_M = 0.9  # two chair discs of ~0.45 m radius touching, until the venue's contacts teach it
 CONTACT_SD_M = 0.3  # centres 0.6-1.2 m apart in frontal and lateral contacts
+CONTACT_FLOOR_SD_M = 0.1  # never trusted closer than this (chairs meet at any angle)
+CONTACT_PRIOR_WEIGHT = 5.0  # the prior counts as this many contacts
+CONTACT_MEMORY = 50.0  # contacts: forgetting of the learned distance
 CONTACT_GATE_CHI2 = 10.83  # 99.9 %, 1 dof
 
 
-@dataclass(frozen=True)
-class BeaconFix:
-    xy: np.ndarray
-    covariance: np.ndarray
-    horizontal_m: float  # the distance the peak RSSI suggests
+def free_space_level_dbm(beacon: Beacon, horizontal_m: float) -> float:
+    """RSSI the venue file promises at `horizontal_m` from under the beacon, path-loss exponent 2."""
+    slant_m = math.hypot(horizontal_m, beacon.height_m - RECEIVER_HEIGHT_M)
+    return beacon.tx_power_dbm - 20.0 * math.log10(max(slant_m, 0.1))
 
 
-def beacon_fix(beacon: Beacon, peak_rssi_dbm: float) -> BeaconFix | None:
-    """A position fix from the strongest sighting of one pass, or None when too weak."""
-    slant = 10.0 ** ((beacon.tx_power_dbm - peak_rssi_dbm) / (10.0 * PATH_LOSS_EXPONENT))
-    height = beacon.height_m - RECEIVER_HEIGHT_M
-    horizontal = math.sqrt(max(slant * slant - height * height, 0.0))
-    if horizontal > BEACON_MAX_HORIZONTAL_M:
-        return None
-    variance = horizontal**2 + BEACON_BASE_SD_M**2
-    return BeaconFix(np.array([beacon.x_m, beacon.y_m]), np.eye(2) * variance, horizontal)
+@dataclass
+class BeaconLevel:
+    """What the hub has learned of one beacon from every chair's passes (fixed size)."""
+
+    peaks: deque = field(default_factory=lambda: deque(maxlen=LEVEL_PASSES))
+    spread_sum_m2: float = 0.0  # squared fix innovations beyond the poses' own variance, with forgetting
+    spread_weight: float = 0.0
+    taken: int = 0
+    refused: int = 0
+
+
+class BeaconLevels:
+    """Close passes of the venue's beacons: the venue file's figures, checked by what each beacon shows.
+
+    RSSI is a poor range, and the venue file's tx power and height may both be wrong (a beacon on
+    the floor instead of hung, 6 dB off its label). A pass's peak is the moment of closest
+    approach; how close, two things say:
+    - the venue file: the peak's distance h through its tx power and height in free space; a pass
+      with h <= BEACON_MAX_HORIZONTAL_M is close, with sigma sqrt(h^2 + BEACON_BASE_SD_M^2);
+    - the beacon itself: its level, the second strongest of its last LEVEL_PASSES pass peaks over
+      all chairs (the strongest alone would follow one lucky fade; most passes are not close, so
+      a median would learn what far looks like); a pass peaking within ACCEPT_DB of it is close
+      too (a hall quieter than its file), and so is a sighting within PASS_DB of it part of a pass.
+    Either way the fix is never trusted more than the beacon's own fixes have earned: their
+    innovations' spread beyond the poses' stated variance, per beacon, refused fixes included,
+    blended with FIX_PRIOR_SD_M. A wrong venue file makes innovations large, and its beacon weak.
+    """
+
+    def __init__(self, beacons: tuple[Beacon, ...]) -> None:
+        self.beacons = {beacon.id: beacon for beacon in beacons}
+        self.levels = {beacon.id: BeaconLevel() for beacon in beacons}
+
+    def level_dbm(self, beacon_id: str) -> float:
+        record = self.levels[beacon_id]
+        if len(record.peaks) >= MIN_PASSES:
+            return float(sorted(record.peaks)[-2])
+        return free_space_level_dbm(self.beacons[beacon_id], CLOSE_M)
+
+    def pass_floor_dbm(self, beacon_id: str) -> float:
+        """Sightings weaker than this are not part of a pass."""
+        return min(PASS_FLOOR_DBM, self.level_dbm(beacon_id) - PASS_DB)
+
+    def close(self, beacon_id: str, peak_dbm: float) -> np.ndarray | None:
+        """A pass ended at this peak: the covariance of its fix at the beacon if it was close, else None.
+        (The peak joins the beacon's record.)"""
+        beacon, level = self.beacons[beacon_id], self.level_dbm(beacon_id)
+        self.levels[beacon_id].peaks.append(peak_dbm)
+        slant = 10.0 ** ((beacon.tx_power_dbm - peak_dbm) / (10.0 * PATH_LOSS_EXPONENT))
+        horizontal = math.sqrt(max(slant * slant - (beacon.height_m - RECEIVER_HEIGHT_M) ** 2, 0.0))
+        if horizontal > BEACON_MAX_HORIZONTAL_M and peak_dbm < level - ACCEPT_DB:
+            return None
+        stated = min(horizontal, BEACON_MAX_HORIZONTAL_M) ** 2 + BEACON_BASE_SD_M**2
+        return np.eye(2) * max(stated, self.learned_variance_m2(beacon_id))
+
+    def learned_variance_m2(self, beacon_id: str) -> float:
+        """Per axis, what this beacon's fixes have shown beyond the poses' variance (with the prior)."""
+        record = self.levels[beacon_id]
+        return (record.spread_sum_m2 + FIX_PRIOR_WEIGHT * FIX_PRIOR_SD_M**2) / (record.spread_weight + FIX_PRIOR_WEIGHT)
+
+    def judged(self, beacon_id: str, shift: np.ndarray, pose_covariance: np.ndarray, taken: bool) -> None:
+        """The gate took or refused a fix of this beacon with this innovation against a pose of this covariance.
+
+        Refused fixes count too (learning from the taken ones alone would learn the gate's width,
+        and a beacon whose close passes are often far would keep its confidence); an innovation
+        counts for at most FIX_CLIP_M, so one blunder of the pose does not condemn the beacon."""
+        record = self.levels[beacon_id]
+        if taken:
+            record.taken += 1
+        else:
+            record.refused += 1
+        forget = 1.0 - 1.0 / FIX_MEMORY
+        beyond = 0.5 * (min(float(shift @ shift), FIX_CLIP_M**2) - float(np.trace(pose_covariance)))
+        record.spread_sum_m2 = forget * record.spread_sum_m2 + beyond
+        record.spread_weight = forget * record.spread_weight + 1.0
+
+
+@dataclass
+class ContactDistance:
+    """How far apart two chairs' centres are when they touch, learned from the contacts the hub took.
+
+    Chairs differ (sports chairs with bumpers, day chairs, footplates first or wheels first): the
+    centres of two touching chairs are 0.6-1.2 m apart. Each taken pair's estimated distance
+    updates a running mean and a spread beyond the two poses' own variance, blended with the prior
+    CONTACT_DISTANCE_M +- CONTACT_SD_M."""
+
+    sum_m: float = 0.0
+    sum_sq_m2: float = 0.0  # squared deviations from the running mean, beyond the poses' variance
+    weight: float = 0.0
+
+    def mean_m(self) -> float:
+        return (self.sum_m + CONTACT_PRIOR_WEIGHT * CONTACT_DISTANCE_M) / (self.weight + CONTACT_PRIOR_WEIGHT)
+
+    def variance_m2(self) -> float:
+        learned = (self.sum_sq_m2 + CONTACT_PRIOR_WEIGHT * CONTACT_SD_M**2) / (self.weight + CONTACT_PRIOR_WEIGHT)
+        return max(learned, CONTACT_FLOOR_SD_M**2)
+
+    def taken(self, distance_m: float, pose_variance_m2: float) -> None:
+        forget = 1.0 - 1.0 / CONTACT_MEMORY
+        deviation = distance_m - self.mean_m()
+        self.sum_m = forget * self.sum_m + distance_m
+        self.sum_sq_m2 = forget * self.sum_sq_m2 + deviation * deviation - pose_variance_m2
+        self.weight = forget * self.weight + 1.0
 
 
 def contact_update(a: ChairState, b: ChairState, contact_m: float = CONTACT_DISTANCE_M,

@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from hub.chair.corrections import CONTACT_DISTANCE_M, CONTACT_GATE_CHI2, CONTACT_SD_M, beacon_fix
+from hub.chair.corrections import CONTACT_GATE_CHI2, BeaconLevels, ContactDistance
 from hub.clocks import ClockOffsets
 from hub.chair.smoother import FixedLagSmoother
 from protocol import keys, messages
@@ -70,11 +70,12 @@ class HubSettings:
     pose_rate_hz: float = 50.0  # of the edges; sizes the smoother's ring
     corrections: Collection[str] = CORRECTIONS  # kept as a tuple in CORRECTIONS' order (below)
     impact_g: float = 6.0  # lower than the paper's 8 g: the gate, not the threshold, rejects false pairs
-    pairing_window_s: float = 0.5
+    # both impacts of a contact are one instant on the clocks the hub aligns (hub/clocks.py): the
+    # paper's 0.5 s also pairs two bumps that merely happen close together
+    pairing_window_s: float = 0.15
     lateness_s: float = 1.0  # how long a group waits for the other chairs' impacts to arrive
     stale_s: float = 5.0  # an agent silent this long (hub clock) no longer holds the others back
-    pass_floor_dbm: float = -72.0  # sightings weaker than this (about 4 m from a goal) are not a pass
-    pass_end_s: float = 1.5  # a pass ends after this long without a sighting above the floor
+    pass_end_s: float = 1.5  # a pass ends after this long without a sighting above its beacon's floor
     extra_m2_per_m: float = 0.003  # covariance the edge is missing, per metre travelled (per axis)
     extra_m2_per_s: float = 0.0005  # ... and per second (shoves and slips without wheel travel)
     extra_max_m2: float = 0.09  # ... up to this: what it stands for (slips, shoves, a fix's timing) is bounded
@@ -167,6 +168,8 @@ class ChairHub:
         self.venue = session.venue.name
         self.clocks = ClockOffsets()
         self.beacons = {beacon.id: beacon for beacon in session.venue.beacons}
+        self.beacon_levels = BeaconLevels(session.venue.beacons)
+        self.contact = ContactDistance()
         ring = int(settings.lag_s * settings.pose_rate_hz) + 2
         self.agents: dict[str, AgentView] = {}
         for agent in session.agents:
@@ -273,7 +276,7 @@ class ChairHub:
     def on_sighting(self, sighting: Any) -> list[Any]:
         if "beacon" not in self.settings.corrections or sighting.beacon_id not in self.beacons:
             return []
-        if sighting.rssi_dbm < self.settings.pass_floor_dbm:
+        if sighting.rssi_dbm < self.beacon_levels.pass_floor_dbm(sighting.beacon_id):
             return []
         view = self.agents[sighting.agent_id]
         time_ns = self.clocks.to_venue(sighting.sensor_id or view.seat_id, sighting.timestamp_ns)
@@ -328,9 +331,11 @@ class ChairHub:
         out = []
         while view.ended and view.ended[0][1].peak_ns <= view.latest_ns:
             beacon_id, ended = view.ended.popleft()
-            fix = beacon_fix(self.beacons[beacon_id], ended.peak_rssi)
-            if fix is not None:
-                out += self._absolute(view, ended.peak_ns, fix.xy, fix.covariance, Kind.BEACON, beacon_id)
+            covariance = self.beacon_levels.close(beacon_id, ended.peak_rssi)
+            if covariance is not None:
+                beacon = self.beacons[beacon_id]
+                out += self._absolute(view, ended.peak_ns, np.array([beacon.x_m, beacon.y_m]), covariance,
+                                      Kind.BEACON, beacon_id)
         while view.fixes and view.fixes[0][0] <= view.latest_ns:
             out += self._absolute(view, *view.fixes.popleft())
         return out
@@ -342,7 +347,10 @@ class ChairHub:
             return []
         shift = xy - then[0]
         spread = then[1] + covariance + (view.extra if kind in (Kind.VIDEO, Kind.MANUAL) else 0.0)
-        if float(shift @ np.linalg.solve(spread, shift)) > FIX_GATE_CHI2:
+        taken = float(shift @ np.linalg.solve(spread, shift)) <= FIX_GATE_CHI2
+        if kind == Kind.BEACON:
+            self.beacon_levels.judged(source, shift, then[1], taken)
+        if not taken:
             if kind != Kind.VIDEO or not self._relock(view, time_ns, shift, covariance, source):
                 self.counters.gated_out += 1
                 return []
@@ -422,6 +430,7 @@ class ChairHub:
 
     def _pair(self, time_ns: int, agents: list[str]) -> list[Any]:
         candidates = []
+        contact_m, contact_var = self.contact.mean_m(), self.contact.variance_m2()
         for a, b in itertools.combinations(agents, 2):
             pose_a, pose_b = self.agents[a].pose_at(time_ns), self.agents[b].pose_at(time_ns)
             if pose_a is None or pose_b is None:
@@ -432,8 +441,8 @@ class ChairHub:
                 continue
             unit = delta / distance
             var_a, var_b = float(unit @ pose_a[1] @ unit), float(unit @ pose_b[1] @ unit)
-            innovation = CONTACT_DISTANCE_M - distance
-            score = innovation * innovation / (var_a + var_b + CONTACT_SD_M**2)
+            innovation = contact_m - distance
+            score = innovation * innovation / (var_a + var_b + contact_var)
             if score <= CONTACT_GATE_CHI2:
                 candidates.append((score, a, b, unit, innovation, var_a, var_b))
             else:
@@ -444,9 +453,10 @@ class ChairHub:
                 continue
             taken |= {a, b}
             self.counters.pairs += 1
+            self.contact.taken(contact_m - innovation, var_a + var_b)
             across = np.array([-unit[1], unit[0]])
             for me, other, direction, noise in ((a, b, unit, var_b), (b, a, -unit, var_a)):
-                covariance = (noise + CONTACT_SD_M**2) * np.outer(direction, direction) + ACROSS_VARIANCE_M2 * np.outer(across, across)
+                covariance = (noise + contact_var) * np.outer(direction, direction) + ACROSS_VARIANCE_M2 * np.outer(across, across)
                 out.append(self._send(self.agents[me], time_ns, direction * innovation, covariance, Kind.COLLISION,
                                       other=other))
         return out

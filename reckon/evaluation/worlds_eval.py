@@ -122,8 +122,9 @@ def summarise(results: list[WorldResult]) -> dict[str, Any]:
                         "median_change": float(np.median(change)), "worst_change": float(change.max()),
                         "best_change": float(change.min())})
     return {"worlds": [r.world for r in results], "methods": methods, "sources": sources,
-            "per_world": [{"world": r.world, **{_label(k): round(v, 4) for k, v in r.mean_error_m.items()
-                                                 if k in HEADLINE}, "figures": r.figures} for r in results]}
+            "per_world": [{"world": r.world, "mean_error_m": {_label(k): round(v, 4) for k, v in r.mean_error_m.items()},
+                           "nees": {_label(k): round(v, 4) for k, v in r.nees.items()}, "figures": r.figures}
+                          for r in results]}
 
 
 HEADLINE: tuple[Key, ...] = (("reckon", "sensors", ("beacon", "collision"), "live"),
@@ -168,5 +169,5 @@ def to_table(summary: dict[str, Any], command: str) -> str:
     lines += ["", "per world, mean error (m): " + ", ".join(_label(k) for k in HEADLINE)]
     for row in summary["per_world"]:
         lines.append(f"  world {row['world']:3d}: " + "  ".join(
-            f"{row.get(_label(k), math.nan):5.2f}" for k in HEADLINE))
+            f"{row['mean_error_m'].get(_label(k), math.nan):5.2f}" for k in HEADLINE))
     return "\n".join(lines)

@@ -10,7 +10,7 @@ import pytest
 
 from edge.chair.estimator import (BIAS, HEADING, X, Y, ChairSample, ChairSettings, Flag, position_update, start,
                                   step, wheel_turn_ratio_prior)
-from hub.chair.corrections import beacon_fix, contact_update
+from hub.chair.corrections import FIX_CLIP_M, BeaconLevels, ContactDistance, contact_update
 from protocol.session import Beacon
 
 SETTINGS = ChairSettings(wheel_diameter_m=0.6)
@@ -110,6 +110,57 @@ def test_magnetometer_corrects_a_wrong_gyro_scale():
     assert with_mag < without / 2
 
 
+def pivots_then(rest, north=0.7, hard_iron=(0.08, -0.05), bias_dps=0.0, seconds=60, pivot_roll_deg=0.0):
+    """`seconds` of pivoting back and forth (+-60 deg/s, rolling `pivot_roll_deg` per sample) in an
+    undisturbed field, then `rest`: (samples, true headings).
+
+    `rest(i, heading)` gives (yaw rate deg/s, wheel roll deg per sample, field turn rad) per later sample."""
+    samples, truth, heading = [], [], 0.0
+    ratio = wheel_turn_ratio_prior(SETTINGS)
+    for i in range(seconds * 200 + len(rest)):
+        if i < seconds * 200:
+            rate, roll, disturbance = 60.0 * math.sin(2 * math.pi * i / 200 / 25.0), pivot_roll_deg, 0.0
+        else:
+            rate, roll, disturbance = rest[i - seconds * 200]
+        heading += math.radians(rate) / 200
+        truth.append(heading)
+        wheel = math.radians(rate) / 200 / ratio / 2
+        angle = north - heading + disturbance
+        field = 0.3 * np.array([math.cos(angle), math.sin(angle)]) + np.array(hard_iron)
+        samples.append(sample(i, yaw_dps=rate + bias_dps, left_deg=roll - wheel, right_deg=roll + wheel,
+                              mag=(field[0], field[1], -0.35)))
+    return samples, truth
+
+
+def test_a_parked_chair_in_a_disturbed_spot_keeps_its_heading():
+    """It rolls 1 m into a spot where the field is turned 20 deg and stays there two minutes: one
+    disturbed place, read again and again, is one reading, not hundreds."""
+    roll = roll_deg(1.0) / 200  # 1 m/s for a second, then parked
+    rest = [(0.0, roll, math.radians(20.0))] * 200 + [(0.0, 0.0, math.radians(20.0))] * (120 * 200)
+    samples, truth = pivots_then(rest)
+    state = start(SETTINGS, samples[0], 0.0, 0.0, 0.0)
+    heading_readings = 0
+    for i, s in enumerate(samples[1:], start=1):
+        before = state.mag.innovation_deg
+        state = step(SETTINGS, state, s)
+        heading_readings += i > 61 * 200 and state.mag.innovation_deg != before
+    error = math.degrees((state.mean[HEADING] - truth[-1] + math.pi) % (2 * math.pi) - math.pi)
+    assert state.mag.ready and heading_readings == 0  # parked: no reading of north - heading at all
+    assert abs(error) < 1.5
+
+
+def test_the_fields_turn_teaches_the_gyro_bias_without_a_stop():
+    """Pivoting in place without ever stopping, the gyro reads 0.6 deg/s high: the turns the field saw
+    teach the bias (no still period ever does)."""
+    rest = [(60.0 * math.sin(2 * math.pi * i / 200 / 7.0), 0.0, 0.0) for i in range(60 * 200)]
+    samples, truth = pivots_then(rest, bias_dps=0.6)
+    state = start(SETTINGS, samples[0], 0.0, 0.0, 0.0)
+    for s in samples[1:]:
+        state = step(SETTINGS, state, s)
+        assert not state.flags & Flag.STILL
+    assert math.degrees(state.mean[BIAS]) == pytest.approx(0.6, abs=0.1)
+
+
 def test_memory_does_not_grow_with_steps():
     per_step = roll_deg(2.0) / 200
     state = start(SETTINGS, sample(0), 0.0, 0.0, 0.0)
@@ -139,11 +190,41 @@ def test_position_fix_is_gated():
     assert not used
 
 
-def test_beacon_fix_uncertainty_follows_rssi():
-    beacon = Beacon("goal", 1.575, 7.5)
-    near, far = beacon_fix(beacon, -60.0), beacon_fix(beacon, -68.0)
-    assert near is not None and far is not None and far.covariance[0, 0] > near.covariance[0, 0]
-    assert beacon_fix(beacon, -85.0) is None  # tens of metres: no fix
+def test_beacon_fixes_follow_the_venue_file_and_what_the_beacon_has_shown():
+    beacon = Beacon("goal", 1.575, 7.5, tx_power_dbm=-59.0, height_m=2.9)
+    levels = BeaconLevels((beacon,))
+    stated = -59.0 - 20 * math.log10(math.hypot(1.0, 2.4))  # the file's level: 1 m from under it, free space
+    assert levels.level_dbm("goal") == pytest.approx(stated) and levels.pass_floor_dbm("goal") == pytest.approx(stated - 12)
+    near, far = levels.close("goal", -60.0), levels.close("goal", -68.0)
+    assert near is not None and far is not None and far[0, 0] > near[0, 0] >= 4.0  # sigma >= 2 m
+    assert levels.close("goal", -85.0) is None  # tens of metres by the venue file, and far below the level
+    assert levels.level_dbm("goal") == -68.0 and levels.pass_floor_dbm("goal") == -80.0  # learned from 3 peaks
+    # a hall quieter than its file: this beacon's passes peak near -80 dBm; its own close ones count
+    quiet = BeaconLevels((beacon,))
+    for peak in (-80.0, -92.0, -79.0, -90.0):
+        quiet.close("goal", peak)
+    assert quiet.level_dbm("goal") == -80.0 and quiet.pass_floor_dbm("goal") == -92.0
+    assert quiet.close("goal", -81.0) is not None and quiet.close("goal", -88.0) is None
+    # fixes that land far from the poses make the beacon weak, refused ones included (each up to FIX_CLIP_M)
+    assert levels.learned_variance_m2("goal") == pytest.approx(1.5**2)
+    for _ in range(30):
+        levels.judged("goal", np.array([30.0, 0.0]), np.eye(2) * 0.1, taken=False)
+    assert levels.levels["goal"].refused == 30
+    assert 15.0 < levels.learned_variance_m2("goal") < 0.5 * FIX_CLIP_M**2
+    assert levels.close("goal", -60.0)[0, 0] == pytest.approx(levels.learned_variance_m2("goal"))
+    for _ in range(200):
+        levels.judged("goal", np.array([0.1, 0.0]), np.eye(2) * 0.1, taken=True)
+    assert levels.close("goal", -60.0)[0, 0] == pytest.approx(near[0, 0])  # consistent again: the file's figure
+
+
+def test_the_contact_distance_is_learned_from_the_contacts_taken():
+    contact = ContactDistance()
+    assert contact.mean_m() == pytest.approx(0.9) and contact.variance_m2() == pytest.approx(0.09)
+    rng = np.random.default_rng(4)
+    for distance in rng.normal(0.65, 0.05, 200):  # small chairs touching at 0.65 m, poses 0.1 m^2 between them
+        contact.taken(distance + rng.normal(0.0, math.sqrt(0.1)), 0.1)
+    assert contact.mean_m() == pytest.approx(0.65, abs=0.1)
+    assert contact.variance_m2() < 0.05  # the poses' own variance is not counted as the contact's
 
 
 def test_contact_pulls_two_chairs_to_a_chair_width():

@@ -92,6 +92,10 @@ def assert_same_state(kernel: ChairState, expected: ChairState) -> None:
     np.testing.assert_allclose(kernel.mag.fit, expected.mag.fit, **close)
     np.testing.assert_allclose(kernel.mag.due_s, expected.mag.due_s, **close)
     np.testing.assert_allclose(kernel.mag.innovation_deg, expected.mag.innovation_deg, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(kernel.mag.stats, expected.mag.stats, **close)
+    for name in ("since_read_m", "since_update_m", "anchor_angle", "turn_gyro_rad", "turn_s", "turn_m"):
+        np.testing.assert_allclose(getattr(kernel.mag, name), getattr(expected.mag, name), err_msg=name, equal_nan=True,
+                                   **close)
 
 
 @pytest.mark.parametrize("overrides", [{}, STRICT_MAG], ids=["default", "strict-mag"])
@@ -152,6 +156,11 @@ def test_packing_keeps_every_field(chairs):
         for name in ("yaw_rate_dps", "left_bias_dps", "right_bias_dps", "still_s", "accel_mean_g", "travel_m",
                      "turn_xy", "turn_xx"):
             assert getattr(back, name) == getattr(original, name)
+        np.testing.assert_array_equal(back.mag.stats, original.mag.stats)
+        assert original.mag.stats[0] > 0  # the disturbance statistics were in use
+        for name in ("since_read_m", "since_update_m", "anchor_angle", "turn_gyro_rad", "turn_s", "turn_m"):
+            assert getattr(back.mag, name) == getattr(original.mag, name) or (
+                math.isnan(getattr(back.mag, name)) and math.isnan(getattr(original.mag, name)))
 
 
 def test_samples_without_magnetometer_pack_as_absent():

@@ -53,6 +53,7 @@ def test_the_command_prints_json(capsys):
     out = json.loads(capsys.readouterr().out)
     assert out["worlds"] == [5] and out["command"].startswith("reckon eval --worlds 5")
     assert out["per_world"][0]["figures"]["court.beacon_height_m"] > 0
+    assert out["per_world"][0]["mean_error_m"]["reckon live sensors beacon+collision"] > 0
 
 
 @pytest.mark.parametrize("argv, message", [
