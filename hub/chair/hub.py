@@ -17,7 +17,7 @@ All times here are venue time: device timestamps plus each device's clock offset
   gate are taken best first, each chair at most once, so three or more impacts at once still yield
   their pairs. A pair becomes one relative constraint: each chair gets the measurement of the
   other's side (exactly the joint update of two independent estimates).
-- Beacons: one fix per pass near a goal, at its strongest sighting (hub/chair/corrections.py).
+- Beacons: one fix per close pass, at its strongest sighting, as trusted as its beacon has earned (hub/chair/corrections.py).
 - Fixes: an operator's or video position at a time, gated like a beacon fix.
 
 Honest covariance. An edge's covariance is its filter's, and after a run of video fixes it states
