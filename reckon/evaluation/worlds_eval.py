@@ -26,19 +26,20 @@ from typing import Any, Callable
 import numpy as np
 
 HURT_TOLERANCE = 0.05  # issue 21: a source may never raise the mean error by more than 5 %
-# (name, method, track, heading without it, corrections without it, heading with it, corrections with it)
-SOURCES: tuple[tuple[str, str, str | None, str, tuple[str, ...], str, tuple[str, ...]], ...] = (
-    ("magnetometer aid", "reckon", "live", "gyro", (), "sensors", ()),
-    ("beacon", "reckon", "live", "sensors", (), "sensors", ("beacon",)),
-    ("collision", "reckon", "live", "sensors", (), "sensors", ("collision",)),
-    ("beacon after collision", "reckon", "live", "sensors", ("collision",), "sensors", ("beacon", "collision")),
-    ("collision after beacon", "reckon", "live", "sensors", ("beacon",), "sensors", ("beacon", "collision")),
-    ("camera", "reckon", "live", "sensors", (), "sensors", ("camera",)),
-    ("refining", "reckon", "live", "sensors", ("beacon", "collision"), "sensors", ("beacon", "collision")),
-    ("beacon", "paper", None, "sensors", (), "sensors", ("beacon",)),
-    ("collision", "paper", None, "sensors", (), "sensors", ("collision",)),
-)
 Key = tuple[str, str, tuple[str, ...], str | None]  # method, heading, corrections, track
+BOTH = ("beacon", "collision")
+# (name, the row without it, the row with it)
+SOURCES: tuple[tuple[str, Key, Key], ...] = (
+    ("magnetometer aid", ("reckon", "gyro", (), "live"), ("reckon", "sensors", (), "live")),
+    ("beacon", ("reckon", "sensors", (), "live"), ("reckon", "sensors", ("beacon",), "live")),
+    ("collision", ("reckon", "sensors", (), "live"), ("reckon", "sensors", ("collision",), "live")),
+    ("beacon after collision", ("reckon", "sensors", ("collision",), "live"), ("reckon", "sensors", BOTH, "live")),
+    ("collision after beacon", ("reckon", "sensors", ("beacon",), "live"), ("reckon", "sensors", BOTH, "live")),
+    ("camera", ("reckon", "sensors", (), "live"), ("reckon", "sensors", ("camera",), "live")),
+    ("refining", ("reckon", "sensors", BOTH, "live"), ("reckon", "sensors", BOTH, "refined")),
+    ("beacon", ("paper", "sensors", (), None), ("paper", "sensors", ("beacon",), None)),
+    ("collision", ("paper", "sensors", (), None), ("paper", "sensors", ("collision",), None)),
+)
 
 
 @dataclass(frozen=True)
@@ -107,16 +108,13 @@ def summarise(results: list[WorldResult]) -> dict[str, Any]:
                         "p90_m": float(np.percentile(values, 90)), "worst_m": float(values.max()),
                         **({"median_nees": float(np.median(nees))} if nees else {})})
     sources = []
-    for name, method, track, heading_off, off, heading_on, on in SOURCES:
-        without, with_it = (method, heading_off, off, track), (method, heading_on, on, track)
-        if name == "refining":
-            with_it = (method, heading_on, on, "refined")
+    for name, without, with_it in SOURCES:
         pairs = [(r.mean_error_m[without], r.mean_error_m[with_it]) for r in results
                  if without in r.mean_error_m and with_it in r.mean_error_m]
         if not pairs:
             continue
         change = np.array([(b - a) / a for a, b in pairs])
-        sources.append({"source": name, "method": method, "worlds": len(change),
+        sources.append({"source": name, "method": with_it[0], "worlds": len(change),
                         "helped": int((change < 0).sum()), "hurt": int((change > 0).sum()),
                         "hurt_over_tolerance": int((change > HURT_TOLERANCE).sum()),
                         "median_change": float(np.median(change)), "worst_change": float(change.max()),
