@@ -30,6 +30,7 @@ class EdgeSummary:
     corrections: int = 0
     extrapolated: int = 0
     wheel_overrun: int = 0
+    bridged: int = 0  # chairs: samples where the seat was silent and the wheels alone told the turn
     final_pose: tuple[float, float, float] | None = None
     swimmer: bool = False
     lengths: int = 0  # swimmers: SwimLength messages out
@@ -48,7 +49,7 @@ class EdgeSummary:
         return (f"edge {self.agent_id}: {self.messages_in} messages in, {self.samples} samples, "
                 f"{self.poses} poses and {self.impacts} impacts out, {self.corrections} corrections applied "
                 f"({self.extrapolated} samples with a wheel extrapolated, {self.wheel_overrun} behind the wheel "
-                f"history); last pose {pose}")
+                f"history, {self.bridged} bridging a silent seat); last pose {pose}")
 
 
 class Edge(Protocol):

@@ -124,6 +124,11 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("agent_id", "string", False),
         ("sensor_id", "string", False),
         ("peak_g", "float", False),  # peak of | |a| - 1 g |
+        # the impact's horizontal specific force (g, chair frame: x forward, y left) at its first sample
+        # above the threshold, gravity removed: a contact pushes the chair away from the other one.
+        # Both 0: not known (a device that does not say).
+        ("forward_g", "float", False),
+        ("left_g", "float", False),
     ],
     # Hub -> edge: a measurement of where the agent was at timestamp_ns (venue clock), as an offset
     # (dx, dy) from the pose the hub had for that time, with the measurement's covariance. The

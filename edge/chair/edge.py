@@ -76,6 +76,7 @@ class ChairEdge:
         summary.corrections = self.corrections_applied
         summary.extrapolated = self.merger.counters.extrapolated
         summary.wheel_overrun = self.merger.counters.wheel_overrun
+        summary.bridged = self.merger.counters.bridged
         state = self.state
         if state is not None:
             mean = state.mean
@@ -132,8 +133,10 @@ class ChairEdge:
             for j in np.flatnonzero(flags & Flag.IMPACT):
                 self.impacts += 1
                 accel = values[begin + j, 3:6]
+                gravity = self.vector[kernel.GRAVITY:kernel.GRAVITY + 3]
                 out.append(messages.new("ImpactEvent", timestamp_ns=int(times[begin + j]), agent_id=self.agent.id,
-                                        sensor_id=self.merger.seat_id, peak_g=float(np.sqrt(accel @ accel) - 1.0)))
+                                        sensor_id=self.merger.seat_id, peak_g=float(np.sqrt(accel @ accel) - 1.0),
+                                        forward_g=float(accel[0] - gravity[0]), left_g=float(accel[1] - gravity[1])))
             begin = i + 1
             if time_ns >= self.next_pose_ns:  # a fixed schedule: timestamp jitter costs no pose
                 self.next_pose_ns = max(self.next_pose_ns + self.period_ns, time_ns - self.period_ns // 2)

@@ -9,8 +9,11 @@ seat-gyro scale error (1), magnetic north in the court frame (rad).
   0.34 deg per metre, algorithms.md). Its bias is re-estimated whenever the chair is still (a
   zero-rate update), which the paper's method never does.
 - A lost seat packet would lose the turns made meanwhile (pivots run at 300+ deg/s): across a
-  gap the heading change comes from the wheels' differential rotation, whose ratio to the seat
-  gyro's turn is learned online (camber and track make it chair-specific).
+  gap the heading change comes from the wheels' axle IMUs, which see the chair's yaw in the
+  wheel plane (edge/chair/merger.py: untouched by scrub and skid), times a ratio to the seat
+  gyro's turn learned online (about 1 / cos camber); without them, from the wheels' differential
+  rotation, likewise learned (camber and track make it chair-specific, pivots scrub). The merger
+  fills a silent seat with bridge samples (no seat reading), so a gap is followed step by step.
 - The seat magnetometer is a self-calibrating aid that learns the hall it is in. The chair's hard
   iron is a fixed offset in the chair frame, found by a running circle fit as the chair turns;
   around its centre the field's angle is (north - heading). A building's disturbance is fixed in
@@ -29,7 +32,9 @@ seat-gyro scale error (1), magnetic north in the court frame (rad).
   - every reading's variance includes the fitted centre's own uncertainty.
   Tilt comes from gravity measured while still, never while moving (a sprint's 2.5 m/s^2 would
   read as 14 deg of pitch).
-- Uncertainty grows with distance and rotation, not time; an impact adds a shove variance.
+- Uncertainty grows with distance and rotation, not time; an impact adds a shove variance in
+  proportion to its horizontal share (of the specific force beyond gravity): a bump from below
+  (a caster landing, the floor) cannot slide the chair, a contact can.
 
 `step(settings, state, sample) -> state` is pure; `start` makes the first state. dt comes from
 the timestamps; a gap (dt > `gap_s`) or a timestamp going backwards sets a flag, never raises.
@@ -75,7 +80,7 @@ class ChairSettings:
     along_track_sd_per_m: float = 0.03  # slip in sprints and braking, 1-3 %
     cross_track_sd_per_m: float = 0.03  # sideways skid in turns
     impact_g: float = 4.0  # a jolt this hard may be a contact that shoves the chair
-    impact_shove_sd_m: float = 0.3  # shoves move chairs 0.1-1 m with no wheel rotation (simulator)
+    impact_shove_sd_m: float = 0.15  # a horizontal impact's shove (worlds 1-10: 0.3 made the filter 3x too doubtful)
     still_wheel_dps: float = 3.0  # both wheels slower than this (bias up to ~1.5 deg/s + noise)
     still_gyro_dps: float = 2.0  # seat yaw rate below this, before bias correction (4 x the bias SD)
     still_accel_g: float = 0.05  # |a| within this of its slow mean
@@ -87,7 +92,9 @@ class ChairSettings:
     track_m: float = 0.82  # wheel contact track, only a prior for the wheel-turn ratio
     camber_deg: float = 17.0  # likewise
     wheel_turn_memory_s: float = 60.0  # forgetting time of the wheel-turn ratio estimate
-    wheel_turn_sd: float = 0.1  # heading uncertainty per radian bridged by the wheels (skid)
+    wheel_turn_sd: float = 0.1  # heading uncertainty per radian bridged by the wheels' differential (skid)
+    wheel_axis_sd: float = 0.02  # ... per radian bridged by the axle IMUs' yaw (ratio learned within ~1 %)
+    wheel_axis_bias_dps: float = 1.0  # ... and per second: the in-plane gyro biases (2 axes x 0.5 deg/s), rectified
     wheel_rate_limit_dps: float = 2000.0  # faster "rates" are a wheel catching up after lost packets
     mag_period_s: float = 0.5  # the magnetometer is read this often (fit and disturbance statistics)
     mag_heading_sd_deg: float = 12.0  # prior of the disturbance's heading SD, until the hall's is learned
@@ -100,7 +107,7 @@ class ChairSettings:
     mag_correlation_min_m: float = 0.5
     mag_turn_s: float = 2.0  # the gyro is measured by the field's turn over this long
     mag_turn_sd_deg: float = 1.5  # noise of a turn the field saw (two readings, the fit's centre error)
-    mag_trust_sd_deg: float = 5.0  # beyond this disturbance a reading's variance grows with its square (worlds 1-10: 5, 8, 12)
+    mag_trust_sd_deg: float = 3.0  # beyond this disturbance a reading's variance grows with its square (docs/reckon-estimator.md: worlds 1-10)
     mag_gate_chi2: float = 6.63  # 99 % for 1 dof
     mag_fit_memory_s: float = 300.0  # forgetting time of the hard-iron circle fit
     mag_fit_min_spread: float = 0.5  # the fit is trusted once field angles spread this well (0..1)
@@ -122,6 +129,7 @@ class ChairSample:
     right_rotation_deg: float
     accel_g: tuple[float, float, float]
     mag_gauss: tuple[float, float, float] | None = None
+    wheel_yaw_deg: float = math.nan  # the chair's turn the axle IMUs saw since the previous sample, x cos(camber)
 
 
 @dataclass(frozen=True)
@@ -158,6 +166,8 @@ class ChairState:
     travel_m: float  # total distance rolled (diagnostic)
     turn_xy: float  # running sums for the wheel-turn ratio: sum(gyro turn * wheel difference)
     turn_xx: float  # and sum(wheel difference^2), both with forgetting
+    axis_xy: float  # likewise for the axle IMUs' yaw: sum(gyro turn * wheel yaw)
+    axis_xx: float  # and sum(wheel yaw^2)
     mag: MagAid
 
 
@@ -171,6 +181,11 @@ def wheel_turn_ratio_prior(settings: ChairSettings) -> float:
     return (math.pi / 180.0) / (settings.track_m / radius - 2.0 * math.sin(settings.camber_deg * DEG))
 
 
+def wheel_axis_ratio_prior(settings: ChairSettings) -> float:
+    """Heading change (rad) per degree of the axle IMUs' yaw, which reads yaw * cos(camber)."""
+    return DEG / math.cos(settings.camber_deg * DEG)
+
+
 def start(settings: ChairSettings, sample: ChairSample, x_m: float, y_m: float, heading_rad: float,
           position_sd_m: float = 0.1, heading_sd_rad: float = 2 * DEG) -> ChairState:
     cov = np.diag([position_sd_m**2, position_sd_m**2, heading_sd_rad**2, (settings.initial_gyro_bias_sd_dps * DEG) ** 2,
@@ -180,6 +195,7 @@ def start(settings: ChairSettings, sample: ChairSample, x_m: float, y_m: float, 
     return ChairState(sample.time_ns, np.array([x_m, y_m, heading_rad, 0.0, 1.0, 0.0, 0.0]), cov,
                       sample.yaw_rate_dps, 0.0, 0.0, 0.0, norm, tuple(a / norm for a in sample.accel_g), Flag.NONE,
                       False, 0.0, wheel_turn_ratio_prior(settings) * prior_weight, prior_weight,
+                      wheel_axis_ratio_prior(settings) * prior_weight, prior_weight,
                       MagAid(np.zeros((4, 4)), 0.0, False, 0, 0.0, np.zeros(MAG_STATS), 0.0, 0.0, math.nan, 0.0, 0.0,
                              0.0))
 
@@ -188,8 +204,9 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
     dt = (sample.time_ns - state.time_ns) * 1e-9
     if dt <= 0.0:
         return replace(state, flags=Flag.BACKWARDS)
-    flags = Flag.GAP if dt > settings.gap_s else Flag.NONE
-    accel_norm = math.sqrt(sum(a * a for a in sample.accel_g))
+    seat = math.isfinite(sample.yaw_rate_dps)  # a bridge sample has the wheels only
+    flags = Flag.GAP if dt > settings.gap_s or not seat or not math.isfinite(state.yaw_rate_dps) else Flag.NONE
+    accel_norm = math.sqrt(sum(a * a for a in sample.accel_g)) if seat else state.accel_mean_g
     alpha = min(dt / settings.accel_mean_time_s, 1.0)
     accel_mean = state.accel_mean_g + alpha * (accel_norm - state.accel_mean_g)
     left_dps, right_dps = sample.left_rotation_deg / dt, sample.right_rotation_deg / dt
@@ -213,10 +230,16 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
     mean, cov = state.mean, state.cov
     wheel_difference = right - left
     turn_xy, turn_xy_weight = state.turn_xy, state.turn_xx
+    axis_xy, axis_xx = state.axis_xy, state.axis_xx
+    wheel_yaw = sample.wheel_yaw_deg
     gyro_rate = 0.5 * (state.yaw_rate_dps + sample.yaw_rate_dps) * DEG - mean[BIAS]
     if flags & Flag.GAP:  # the seat gyro saw nothing in between: the wheels tell the turn
-        turn = turn_xy / turn_xy_weight * wheel_difference
-        turn_var = (settings.wheel_turn_sd * turn) ** 2
+        if math.isfinite(wheel_yaw):
+            turn = axis_xy / axis_xx * wheel_yaw
+            turn_var = (settings.wheel_axis_sd * turn) ** 2 + (settings.wheel_axis_bias_dps * DEG * dt) ** 2
+        else:
+            turn = turn_xy / turn_xy_weight * wheel_difference
+            turn_var = (settings.wheel_turn_sd * turn) ** 2
         d_turn_d_bias = d_turn_d_scale = 0.0
     else:
         turn = (1.0 + mean[GYRO_SCALE]) * gyro_rate * dt
@@ -227,6 +250,9 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
             forget = math.exp(-dt / settings.wheel_turn_memory_s)
             turn_xy = forget * turn_xy + turn * wheel_difference
             turn_xy_weight = forget * turn_xy_weight + wheel_difference * wheel_difference
+            if math.isfinite(wheel_yaw):
+                axis_xy = forget * axis_xy + turn * wheel_yaw
+                axis_xx = forget * axis_xx + wheel_yaw * wheel_yaw
 
     mid = mean[HEADING] + 0.5 * turn
     travel = mean[SCALE] * base_travel
@@ -237,10 +263,14 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
     new_mean[HEADING] += turn
     in_impact = accel_norm - 1.0 > settings.impact_g
     shove = in_impact and not state.in_impact  # once per impact, not per sample above the threshold
+    shove_var = 0.0
     if shove:
         flags |= Flag.IMPACT
+        horizontal = (sample.accel_g[0] - gravity[0]) ** 2 + (sample.accel_g[1] - gravity[1]) ** 2
+        vertical = (sample.accel_g[2] - gravity[2]) ** 2
+        shove_var = settings.impact_shove_sd_m**2 * (horizontal / (horizontal + vertical))
     new_cov = _propagate_covariance(settings, cov, c, s, travel, base_travel, d_turn_d_bias, d_turn_d_scale,
-                                    turn_var, shove, dt)
+                                    turn_var, shove_var, dt)
 
     if still:  # zero-rate update: the seat gyro reads its bias
         flags |= Flag.STILL
@@ -252,7 +282,7 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
                                                       abs(travel), raw_turn)
     return ChairState(sample.time_ns, new_mean, new_cov, sample.yaw_rate_dps, left_bias, right_bias, still_s,
                       accel_mean, gravity, flags | mag_flags, in_impact, state.travel_m + abs(travel), turn_xy,
-                      turn_xy_weight, mag)
+                      turn_xy_weight, axis_xy, axis_xx, mag)
 
 
 def _magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, gravity: tuple[float, float, float],
@@ -410,7 +440,7 @@ def position_update(state: ChairState, measured_xy: np.ndarray, covariance: np.n
 
 def _propagate_covariance(settings: ChairSettings, cov: np.ndarray, c: float, s: float, travel: float,
                           base_travel: float, d_turn_d_bias: float, d_turn_d_scale: float, turn_var: float,
-                          shove: bool, dt: float) -> np.ndarray:
+                          shove_var: float, dt: float) -> np.ndarray:
     """P <- F P F^T + Q for one step; (c, s) = cos/sin of the mid-step heading."""
     jacobian = np.eye(N)
     jacobian[X, HEADING] = -travel * s
@@ -423,9 +453,8 @@ def _propagate_covariance(settings: ChairSettings, cov: np.ndarray, c: float, s:
         jacobian[Y, column] = travel * c * 0.5 * d_turn
     along = (settings.along_track_sd_per_m * travel) ** 2
     across = (settings.cross_track_sd_per_m * travel) ** 2
-    if shove:
-        along += settings.impact_shove_sd_m**2
-        across += settings.impact_shove_sd_m**2
+    along += shove_var
+    across += shove_var
     noise = np.zeros((N, N))
     noise[X, X] = along * c * c + across * s * s
     noise[Y, Y] = along * s * s + across * c * c

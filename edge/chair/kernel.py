@@ -3,7 +3,7 @@
 Why: one Python `step` costs ~17 us (~60k samples/s), and the edge estimator's target in replay
 is >= 1 M samples/s per core. `run_batch` is a numba loop over flat arrays, with no allocation
 per sample, that does what calling `step` once per sample does: the same math in the same
-order (zero-rate update, gap bridging by the wheel-turn ratio, impact shove, BACKWARDS samples,
+order (zero-rate update, gap bridging by the wheels, impact shove, BACKWARDS samples,
 the magnetometer aid). edge/chair/estimator.py's `step` stays the readable reference: change the filter
 there first, then here; tests/edge/test_chair_kernel.py holds the kernel to it.
 
@@ -55,7 +55,9 @@ IN_IMPACT = FLAGS + 1  # 0 or 1
 TRAVEL = IN_IMPACT + 1
 TURN_XY = TRAVEL + 1
 TURN_XX = TURN_XY + 1
-MAG_FIT = TURN_XX + 1  # 4 x 4 moments, row-major
+AXIS_XY = TURN_XX + 1
+AXIS_XX = AXIS_XY + 1
+MAG_FIT = AXIS_XX + 1  # 4 x 4 moments, row-major
 MAG_DUE = MAG_FIT + 16
 MAG_READY = MAG_DUE + 1  # 0 or 1
 MAG_REJECTIONS = MAG_READY + 1
@@ -75,12 +77,13 @@ STATE_SIZE = MAG_TURN_M + 1
  S_ALONG_SD, S_ACROSS_SD, S_SHOVE_VAR, S_BIAS_WALK_VAR, S_SCALE_WALK_VAR, S_STILL_RATE_VAR, S_MAG_PERIOD,
  S_MAG_FIT_FORGET, S_MAG_MIN_SPREAD_SQ, S_MAG_MIN_POINTS, S_MAG_HEADING_VAR, S_MAG_GATE_CHI2,
  S_MAG_RECOVER_REJECTIONS, S_MAG_FLOOR_VAR, S_MAG_LEVEL_WEIGHT, S_MAG_FORGET, S_MAG_MIN_STEP, S_MAG_CORRELATION_PRIOR,
- S_MAG_CORRELATION_MAX, S_MAG_CORRELATION_MIN, S_MAG_TRUST_VAR, S_MAG_TURN_S, S_MAG_TURN_VAR) = range(36)
-SETTINGS_SIZE = S_MAG_TURN_VAR + 1
+ S_MAG_CORRELATION_MAX, S_MAG_CORRELATION_MIN, S_MAG_TRUST_VAR, S_MAG_TURN_S, S_MAG_TURN_VAR, S_WHEEL_AXIS_SD,
+ S_WHEEL_AXIS_BIAS) = range(38)
+SETTINGS_SIZE = S_WHEEL_AXIS_BIAS + 1
 
 # --- sample rows ---------------------------------------------------------------------------
-V_YAW_RATE, V_LEFT, V_RIGHT, V_ACCEL, V_MAG, V_HAS_MAG = 0, 1, 2, 3, 6, 9  # accel and mag: 3 values each
-SAMPLE_WIDTH = 10
+V_YAW_RATE, V_LEFT, V_RIGHT, V_ACCEL, V_MAG, V_HAS_MAG, V_WHEEL_YAW = 0, 1, 2, 3, 6, 9, 10  # accel, mag: 3 each
+SAMPLE_WIDTH = 11
 
 STILL, GAP, BACKWARDS, IMPACT = int(Flag.STILL), int(Flag.GAP), int(Flag.BACKWARDS), int(Flag.IMPACT)
 MAG_USED, MAG_REJECTED = int(Flag.MAG_USED), int(Flag.MAG_REJECTED)
@@ -130,6 +133,8 @@ def pack_settings(settings: ChairSettings) -> np.ndarray:
     vector[S_MAG_TRUST_VAR] = (s.mag_trust_sd_deg * DEG) ** 2
     vector[S_MAG_TURN_S] = s.mag_turn_s
     vector[S_MAG_TURN_VAR] = (s.mag_turn_sd_deg * DEG) ** 2
+    vector[S_WHEEL_AXIS_SD] = s.wheel_axis_sd
+    vector[S_WHEEL_AXIS_BIAS] = s.wheel_axis_bias_dps * DEG
     return vector
 
 
@@ -148,6 +153,7 @@ def pack_state(state: ChairState) -> np.ndarray:
     vector[IN_IMPACT] = state.in_impact
     vector[TRAVEL] = state.travel_m
     vector[TURN_XY], vector[TURN_XX] = state.turn_xy, state.turn_xx
+    vector[AXIS_XY], vector[AXIS_XX] = state.axis_xy, state.axis_xx
     vector[MAG_FIT:MAG_FIT + 16] = np.asarray(state.mag.fit, dtype=float).ravel()
     vector[MAG_DUE] = state.mag.due_s
     vector[MAG_READY] = state.mag.ready
@@ -171,7 +177,8 @@ def unpack_state(vector: np.ndarray) -> ChairState:
     return ChairState(_time_ns(v), v[MEAN:MEAN + N].copy(), v[COV:COV + N * N].reshape(N, N).copy(),
                       float(v[YAW_RATE]), float(v[LEFT_BIAS]), float(v[RIGHT_BIAS]), float(v[STILL_S]),
                       float(v[ACCEL_MEAN]), tuple(float(g) for g in v[GRAVITY:GRAVITY + 3]), Flag(int(v[FLAGS])),
-                      bool(v[IN_IMPACT]), float(v[TRAVEL]), float(v[TURN_XY]), float(v[TURN_XX]), mag)
+                      bool(v[IN_IMPACT]), float(v[TRAVEL]), float(v[TURN_XY]), float(v[TURN_XX]), float(v[AXIS_XY]),
+                      float(v[AXIS_XX]), mag)
 
 
 def pack_samples(samples: list[ChairSample]) -> tuple[np.ndarray, np.ndarray]:
@@ -179,7 +186,8 @@ def pack_samples(samples: list[ChairSample]) -> tuple[np.ndarray, np.ndarray]:
     times = np.fromiter((s.time_ns for s in samples), dtype=np.int64, count=len(samples))
     nan3 = (math.nan, math.nan, math.nan)
     values = np.array([(s.yaw_rate_dps, s.left_rotation_deg, s.right_rotation_deg, *s.accel_g,
-                        *(nan3 if s.mag_gauss is None else s.mag_gauss), 0.0 if s.mag_gauss is None else 1.0)
+                        *(nan3 if s.mag_gauss is None else s.mag_gauss), 0.0 if s.mag_gauss is None else 1.0,
+                        s.wheel_yaw_deg)
                        for s in samples], dtype=float).reshape(len(samples), SAMPLE_WIDTH)
     return times, values
 
@@ -262,12 +270,16 @@ def run_batch(settings: np.ndarray, state: np.ndarray, times: np.ndarray,
 @njit(cache=True, inline='always')
 def _step(s, st, mean, cov, fit, work, dt, sample):
     """edge/chair/estimator.py's `step` for dt > 0, in place on the packed state; returns the flags."""
-    flags = GAP if dt > s[S_GAP] else 0
-    accel_norm = math.sqrt(_sum3(sample[V_ACCEL] * sample[V_ACCEL], sample[V_ACCEL + 1] * sample[V_ACCEL + 1],
-                                 sample[V_ACCEL + 2] * sample[V_ACCEL + 2]))
+    yaw_rate = sample[V_YAW_RATE]
+    seat = math.isfinite(yaw_rate)  # a bridge sample has the wheels only
+    flags = GAP if dt > s[S_GAP] or not seat or not math.isfinite(st[YAW_RATE]) else 0
+    if seat:
+        accel_norm = math.sqrt(_sum3(sample[V_ACCEL] * sample[V_ACCEL], sample[V_ACCEL + 1] * sample[V_ACCEL + 1],
+                                     sample[V_ACCEL + 2] * sample[V_ACCEL + 2]))
+    else:
+        accel_norm = st[ACCEL_MEAN]
     alpha = min(dt / s[S_ACCEL_MEAN_TIME], 1.0)
     accel_mean = st[ACCEL_MEAN] + alpha * (accel_norm - st[ACCEL_MEAN])
-    yaw_rate = sample[V_YAW_RATE]
     left_dps, right_dps = sample[V_LEFT] / dt, sample[V_RIGHT] / dt
     still_now = (abs(left_dps) < s[S_STILL_WHEEL] and abs(right_dps) < s[S_STILL_WHEEL]
                  and abs(yaw_rate) < s[S_STILL_GYRO] and abs(accel_norm - accel_mean) < s[S_STILL_ACCEL])
@@ -284,10 +296,15 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
         _blend_gravity(st, sample, beta)
 
     wheel_difference = right - left
+    wheel_yaw = sample[V_WHEEL_YAW]
     gyro_rate = 0.5 * (st[YAW_RATE] + yaw_rate) * DEG - mean[BIAS]
     if flags & GAP:  # the seat gyro saw nothing in between: the wheels tell the turn
-        turn = st[TURN_XY] / st[TURN_XX] * wheel_difference
-        turn_var = _pow2(s[S_WHEEL_TURN_SD] * turn)
+        if math.isfinite(wheel_yaw):
+            turn = st[AXIS_XY] / st[AXIS_XX] * wheel_yaw
+            turn_var = _pow2(s[S_WHEEL_AXIS_SD] * turn) + _pow2(s[S_WHEEL_AXIS_BIAS] * dt)
+        else:
+            turn = st[TURN_XY] / st[TURN_XX] * wheel_difference
+            turn_var = _pow2(s[S_WHEEL_TURN_SD] * turn)
         d_turn_d_bias = d_turn_d_scale = 0.0
     else:
         turn = (1.0 + mean[GYRO_SCALE]) * gyro_rate * dt
@@ -298,6 +315,9 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
             forget = math.exp(-dt / s[S_WHEEL_TURN_MEMORY])
             st[TURN_XY] = forget * st[TURN_XY] + turn * wheel_difference
             st[TURN_XX] = forget * st[TURN_XX] + wheel_difference * wheel_difference
+            if math.isfinite(wheel_yaw):
+                st[AXIS_XY] = forget * st[AXIS_XY] + turn * wheel_yaw
+                st[AXIS_XX] = forget * st[AXIS_XX] + wheel_yaw * wheel_yaw
 
     mid = mean[HEADING] + 0.5 * turn
     travel = mean[SCALE] * base_travel
@@ -307,10 +327,15 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
     mean[HEADING] += turn
     in_impact = accel_norm - 1.0 > s[S_IMPACT_G]
     shove = in_impact and st[IN_IMPACT] == 0.0  # once per impact, not per sample above the threshold
+    shove_var = 0.0
     if shove:
         flags |= IMPACT
+        horizontal = (_pow2(sample[V_ACCEL] - st[GRAVITY])
+                      + _pow2(sample[V_ACCEL + 1] - st[GRAVITY + 1]))
+        vertical = _pow2(sample[V_ACCEL + 2] - st[GRAVITY + 2])
+        shove_var = s[S_SHOVE_VAR] * (horizontal / (horizontal + vertical))
     _propagate_covariance(s, cov, work, c, sn, travel, base_travel, d_turn_d_bias, d_turn_d_scale, turn_var,
-                          shove, dt)
+                          shove_var, dt)
 
     if still:  # zero-rate update: the seat gyro reads its bias
         flags |= STILL
@@ -338,7 +363,7 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
 
 @njit(cache=True, inline='always')
 def _propagate_covariance(s, cov, work, c, sn, travel, base_travel, d_turn_d_bias, d_turn_d_scale, turn_var,
-                          shove, dt):
+                          shove_var, dt):
     """P <- F P F^T + Q in place, touching only what F's sparsity changes.
 
     F is the identity except in rows X, Y and HEADING, so F P differs from P only in those rows
@@ -373,9 +398,8 @@ def _propagate_covariance(s, cov, work, c, sn, travel, base_travel, d_turn_d_bia
     # + Q: slip along and across the mid-step heading, the gyro's noise, the random walks
     along = _pow2(s[S_ALONG_SD] * travel)
     across = _pow2(s[S_ACROSS_SD] * travel)
-    if shove:
-        along += s[S_SHOVE_VAR]
-        across += s[S_SHOVE_VAR]
+    along += shove_var
+    across += shove_var
     cov[X, X] += along * c * c + across * sn * sn
     cov[Y, Y] += along * sn * sn + across * c * c
     cov[X, Y] += (along - across) * c * sn

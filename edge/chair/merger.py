@@ -6,6 +6,16 @@ rotation; every seat sample becomes a `ChairSample` that carries how far each wh
 the previous seat sample, interpolated at the seat sample's time (device clocks, as the paper
 uses them). So a lost wheel or seat packet loses no distance: the next increment spans it.
 
+Each wheel also integrates the chair's yaw as its axle IMU sees it. The wheel's gyro reads the
+chair's yaw projected on the wheel plane, rotating with the wheel; its size is |yaw| cos(camber)
+and its sign that of its dot product with the in-plane specific force (gravity's reaction points
+up; the product is rotation- and mounting-invariant). Unlike the wheels' differential rotation it
+is untouched by scrub and skid. Where the seat went silent for more than `BRIDGE_AFTER_NS`, the
+merger emits bridge samples every `BRIDGE_STEP_NS` between its samples where a wheel was heard,
+with the wheels' increments and no seat reading (`yaw_rate_dps` NaN), so the estimator follows the
+path through a lost burst of seat packets instead of taking it as one straight step (a device
+silent altogether still gets one step across its silence).
+
 A seat sample waits until both wheels have reported past its time, but never more than
 `max_wait_s` behind the newest seat sample: then a silent wheel is extrapolated at its last rate
 (counted in `extrapolated`), and its rotation catches up when it reports again. The default
@@ -19,6 +29,7 @@ kept, counted in `wheel_overrun` (live streams share one clock and never drift t
 from __future__ import annotations
 
 import bisect
+import math
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
@@ -28,6 +39,10 @@ from protocol.session import Agent, Mount
 
 _INDEX = {"x": 0, "y": 1, "z": 2}
 HISTORY = 1024  # wheel points kept: 5 s at 200 Hz, more than max_wait_s needs
+BRIDGE_AFTER_NS = 50_000_000  # a seat silent this long (10 samples at 200 Hz) is bridged by the wheels
+BRIDGE_STEP_NS = 10_000_000  # at this spacing: a 500 deg/s pivot turns 5 deg per step
+WHEEL_SILENT_NS = 20_000_000  # a wheel's own samples further apart than this: its yaw there is a straight line
+NAN3 = (math.nan, math.nan, math.nan)
 
 
 def _axis(axis: str) -> tuple[int, float]:
@@ -46,12 +61,14 @@ def _up_axis(forward: str, left: str) -> tuple[int, float]:
 
 
 class WheelIntegrator:
-    """Running rotation (deg) of one wheel, with a bounded history to interpolate in."""
+    """Running rotation (deg) of one wheel and the chair's yaw (deg) it saw, with a bounded history to interpolate in."""
 
     def __init__(self) -> None:
         self.times: deque[int] = deque(maxlen=HISTORY)
         self.rotations: deque[float] = deque(maxlen=HISTORY)
+        self.yaws: deque[float] = deque(maxlen=HISTORY)
         self.rate_dps = 0.0
+        self.yaw_rate_dps = 0.0
         self.out_of_order = 0
         self.overrun = 0  # lookups older than the history: the seat fell > HISTORY samples behind
 
@@ -59,30 +76,49 @@ class WheelIntegrator:
     def newest_ns(self) -> int | None:
         return self.times[-1] if self.times else None
 
-    def push(self, time_ns: int, spin_dps: float) -> None:
+    def push(self, time_ns: int, spin_dps: float, yaw_dps: float) -> None:
         if self.times and time_ns <= self.times[-1]:
             self.out_of_order += 1
             return
-        rotation = 0.0
+        rotation = yaw = 0.0
         if self.times:
-            rotation = self.rotations[-1] + 0.5 * (self.rate_dps + spin_dps) * (time_ns - self.times[-1]) * 1e-9
+            dt = (time_ns - self.times[-1]) * 1e-9
+            rotation = self.rotations[-1] + 0.5 * (self.rate_dps + spin_dps) * dt
+            yaw = self.yaws[-1] + 0.5 * (self.yaw_rate_dps + yaw_dps) * dt
         self.times.append(time_ns)
         self.rotations.append(rotation)
-        self.rate_dps = spin_dps
+        self.yaws.append(yaw)
+        self.rate_dps, self.yaw_rate_dps = spin_dps, yaw_dps
 
-    def at(self, time_ns: int) -> float:
-        """Rotation at `time_ns`: interpolated inside the history, extrapolated past its ends."""
+    def at(self, time_ns: int) -> tuple[float, float, bool]:
+        """(rotation, yaw, seen) at `time_ns`: interpolated inside the history, extrapolated past its
+        ends; `seen` is False where the wheel itself was silent for more than `WHEEL_SILENT_NS`."""
         if not self.times:
-            return 0.0
+            return 0.0, 0.0, False
         if time_ns >= self.times[-1]:
-            return self.rotations[-1] + self.rate_dps * (time_ns - self.times[-1]) * 1e-9
+            ahead = time_ns - self.times[-1]
+            return (self.rotations[-1] + self.rate_dps * ahead * 1e-9, self.yaws[-1] + self.yaw_rate_dps * ahead * 1e-9,
+                    ahead <= WHEEL_SILENT_NS)
         i = bisect.bisect_right(self.times, time_ns)
         if i == 0:  # before the wheel's first sample, or (history full) before what is kept
             self.overrun += len(self.times) == self.times.maxlen
-            return self.rotations[0]
+            return self.rotations[0], self.yaws[0], False
         t0, t1 = self.times[i - 1], self.times[i]
-        r0, r1 = self.rotations[i - 1], self.rotations[i]
-        return r0 + (r1 - r0) * (time_ns - t0) / (t1 - t0)
+        w = (time_ns - t0) / (t1 - t0)
+        return (self.rotations[i - 1] + (self.rotations[i] - self.rotations[i - 1]) * w,
+                self.yaws[i - 1] + (self.yaws[i] - self.yaws[i - 1]) * w, t1 - t0 <= WHEEL_SILENT_NS)
+
+
+def plane_yaw_dps(gyro: tuple, accel: tuple, spin_index: int) -> float:
+    """The chair's yaw rate as a wheel IMU sees it, times cos(camber): the in-plane gyro's size, signed by
+    its dot product with the in-plane specific force (positive for a left turn, whatever the mounting).
+    The size, not the projection on that force: in a pivot the hub's centripetal acceleration tilts the
+    force by tens of degrees (measured: the projection reads 2/3 of the turn). The in-plane biases and
+    the spin leaking in through a misaligned mounting add to the size; a fit of them on the spin was
+    tried and made turns worse (the yaw part does not average out over the wheel's angle in pivots)."""
+    a, b = (k for k in range(3) if k != spin_index)
+    size = math.hypot(gyro[a], gyro[b])
+    return size if gyro[a] * accel[a] + gyro[b] * accel[b] >= 0.0 else -size
 
 
 @dataclass
@@ -91,6 +127,7 @@ class MergerCounters:
     extrapolated: int = 0  # seat samples emitted before a wheel had reported past them
     wheel_overrun: int = 0  # seat samples older than a wheel's kept history
     seat_out_of_order: int = 0
+    bridged: int = 0  # bridge samples emitted in silences of the seat (included in `samples`)
     wheel_out_of_order: dict[str, int] = field(default_factory=dict)
 
 
@@ -109,7 +146,7 @@ class ChairMerger:
         self.wheels = {"left": WheelIntegrator(), "right": WheelIntegrator()}
         self.pending: deque[tuple[int, float, tuple[float, float, float], tuple[float, float, float] | None]] = deque()
         self.last_seat_ns: int | None = None
-        self.last_rotation = {"left": 0.0, "right": 0.0}
+        self.last_rotation = {"left": (0.0, 0.0), "right": (0.0, 0.0)}
         self.counters = MergerCounters()
 
     def push_batch(self, batch: Any) -> list[ChairSample]:
@@ -130,7 +167,7 @@ class ChairMerger:
         if wheel is not None:
             index, sign = self.spin[sensor_id]
             before = self.wheels[wheel].out_of_order
-            self.wheels[wheel].push(time_ns, sign * gyro_dps[index])
+            self.wheels[wheel].push(time_ns, sign * gyro_dps[index], plane_yaw_dps(gyro_dps, accel_g, index))
             if self.wheels[wheel].out_of_order != before:
                 self.counters.wheel_out_of_order[sensor_id] = self.wheels[wheel].out_of_order
         elif sensor_id == self.seat_id:
@@ -161,13 +198,25 @@ class ChairMerger:
             self.pending.popleft()
             if not covered:
                 self.counters.extrapolated += 1
-            rotation = {name: w.at(time_ns) for name, w in self.wheels.items()}
-            self.counters.wheel_overrun = sum(w.overrun for w in self.wheels.values())
-            if self.last_seat_ns is None:  # the first sample only anchors the wheel integrals
-                increments = {"left": 0.0, "right": 0.0}
-            else:
-                increments = {name: rotation[name] - self.last_rotation[name] for name in rotation}
-            self.last_rotation, self.last_seat_ns = rotation, time_ns
-            self.counters.samples += 1
-            out.append(ChairSample(time_ns, yaw, increments["left"], increments["right"], accel, mag))
+            if self.last_seat_ns is not None and time_ns - self.last_seat_ns > BRIDGE_AFTER_NS:
+                for bridge_ns in range(self.last_seat_ns + BRIDGE_STEP_NS, time_ns - BRIDGE_STEP_NS // 2, BRIDGE_STEP_NS):
+                    if any(w.at(bridge_ns)[2] for w in self.wheels.values()):  # where a wheel was heard
+                        out.append(self._sample(bridge_ns, math.nan, NAN3, None))
+                        self.counters.bridged += 1
+            out.append(self._sample(time_ns, yaw, accel, mag))
         return out
+
+    def _sample(self, time_ns: int, yaw: float, accel: tuple, mag: tuple | None) -> ChairSample:
+        now = {name: w.at(time_ns) for name, w in self.wheels.items()}
+        self.counters.wheel_overrun = sum(w.overrun for w in self.wheels.values())
+        if self.last_seat_ns is None:  # the first sample only anchors the wheel integrals
+            turned = {"left": (0.0, 0.0), "right": (0.0, 0.0)}
+        else:
+            turned = {name: (now[name][0] - self.last_rotation[name][0], now[name][1] - self.last_rotation[name][1])
+                      for name in now}
+        self.last_rotation, self.last_seat_ns = now, time_ns
+        self.counters.samples += 1
+        seen = [name for name in now if now[name][2]]
+        # a wheel that was silent here knows nothing of the turn: the other one tells it alone
+        wheel_yaw = sum(turned[name][1] for name in seen or now) / len(seen or now)
+        return ChairSample(time_ns, yaw, turned["left"][0], turned["right"][0], accel, mag, wheel_yaw)

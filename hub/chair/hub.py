@@ -13,10 +13,14 @@ correction (`correction_sequence`), the hub adds the shift it expects the edge t
 All times here are venue time: device timestamps plus each device's clock offset (hub/clocks.py).
 - Collisions: impacts above `impact_g` within `pairing_window_s` of the first form a group, closed
   once every live agent's poses have passed it by `lateness_s`. Every pair in the group is scored
-  by how well the two estimates fit a contact (chi-square with both covariances); pairs inside the
-  gate are taken best first, each chair at most once, so three or more impacts at once still yield
-  their pairs. A pair becomes one relative constraint: each chair gets the measurement of the
-  other's side (exactly the joint update of two independent estimates).
+  by how well the two estimates fit a contact (chi-square with both covariances); a pair whose two
+  pushes (each impact's horizontal force, turned by its chair's heading) do not point opposite
+  ways is no contact; pairs inside the gate are taken best first, each chair at most once, so
+  three or more impacts at once still yield their pairs. A pair becomes one relative constraint:
+  each chair gets the measurement of the other's side (exactly the joint update of two
+  independent estimates). The pushes also say which way the other chair was (action and reaction
+  point along the line between the centres), so the constraint holds across the line too, within
+  `PUSH_LINE_SD` of its direction; without pushes it holds along the estimates' line only.
 - Beacons: one fix per close pass, at its strongest sighting, as trusted as its beacon has earned (hub/chair/corrections.py).
 - Fixes: an operator's or video position at a time, gated like a beacon fix.
 
@@ -61,6 +65,8 @@ ACROSS_VARIANCE_M2 = 1e4  # a contact says nothing about the direction across th
 HISTORY = 1024  # poses kept per agent for looking back to a measured time (20 s at 50 Hz)
 GAP_S = 0.2  # poses further apart than this are a gap (the edge publishes at 50 Hz)
 _EYE2 = np.eye(2)  # read only
+PUSH_GATE_COS = math.cos(math.radians(60.0))  # both headings' errors, and pushes off the line between centres
+PUSH_LINE_SD = math.radians(20.0)  # spread of the pushes' line about the centres' (both headings, glancing contacts)
 STALE_MPS = 2.0  # a chair's typical speed (a 10-chair game: 150-200 m in 120 s): how a pose's doubt grows with its age
 
 
@@ -108,7 +114,7 @@ class AgentView:
     agent_id: str
     seat_id: str
     smoother: FixedLagSmoother
-    history: deque = field(default_factory=lambda: deque(maxlen=HISTORY))  # (time, xy, cov 2x2) live
+    history: deque = field(default_factory=lambda: deque(maxlen=HISTORY))  # (time, xy, cov 2x2, heading) live
     latest_ns: int | None = None  # venue time of the newest pose
     arrival_ns: int = 0  # hub clock when its last message came
     covariance: np.ndarray = field(default_factory=lambda: np.eye(3))
@@ -133,8 +139,12 @@ class AgentView:
         """Live position and its covariance at `time_ns` (the last pose not after it; the first if none)."""
         if not self.history:
             return None
-        _, xy, cov = self.history[self._last_at(time_ns) or 0]
+        _, xy, cov, _ = self.history[self._last_at(time_ns) or 0]
         return xy, cov
+
+    def heading_at(self, time_ns: int) -> float | None:
+        """Live heading (rad) at `time_ns`, as pose_at picks the pose."""
+        return self.history[self._last_at(time_ns) or 0][3] if self.history else None
 
     def pose_bridged(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """As pose_at, but inside a gap of more than GAP_S between two poses (the link stalled) the position
@@ -143,7 +153,7 @@ class AgentView:
         after = self._last_at(time_ns)
         if after is None or after + 1 >= len(self.history):
             return self.pose_at(time_ns)
-        (t0, xy0, cov0), (t1, xy1, cov1) = self.history[after], self.history[after + 1]
+        (t0, xy0, cov0, _), (t1, xy1, cov1, _) = self.history[after], self.history[after + 1]
         if (t1 - t0) * 1e-9 <= GAP_S:
             return xy0, cov0
         w = (time_ns - t0) / (t1 - t0)
@@ -157,6 +167,7 @@ class HubCounters:
     groups: int = 0
     pairs: int = 0
     gated_out: int = 0  # candidate corrections the gate rejected
+    pushes_not_opposed: int = 0  # impact pairs whose pushes did not point opposite ways: no contact
     relocks: int = 0  # video fixes taken after a run of consistent refusals
     late_impacts: int = 0  # arrived after their window had closed: paired with later ones only
 
@@ -240,7 +251,7 @@ class ChairHub:
         view.latest_ns = time_ns if view.latest_ns is None else max(view.latest_ns, time_ns)
         honest = covariance.copy()
         honest[:2, :2] += view.extra
-        view.history.append((time_ns, xy, covariance[:2, :2]))
+        view.history.append((time_ns, xy, covariance[:2, :2], pose.heading_rad))
         view.poses += 1
         out = [self._pose_message(view, time_ns, xy, pose.heading_rad, honest, messages.Track.LIVE)]
         out += [self._refined(view, entry) for entry in view.smoother.add(time_ns, xy, pose.heading_rad, covariance)]
@@ -271,7 +282,7 @@ class ChairHub:
         if self._oldest_impact_ns is not None and (time_ns < self._oldest_impact_ns
                                                    or len(self.impacts) == self.impacts.maxlen):
             self._oldest_impact_ns = None  # an older impact, or the oldest falls out of the deque
-        self.impacts.append((time_ns, event.agent_id))
+        self.impacts.append((time_ns, event.agent_id, event.forward_g, event.left_g))
 
     def on_sighting(self, sighting: Any) -> list[Any]:
         if "beacon" not in self.settings.corrections or sighting.beacon_id not in self.beacons:
@@ -405,10 +416,12 @@ class ChairHub:
             group = [item for item in ordered if item[0] - first_ns <= window_ns]
             ordered = ordered[len(group):]
             self.closed_until_ns = max(self.closed_until_ns, group[-1][0])
-            agents = sorted({agent for _, agent in group})
-            if len(agents) >= 2:
+            pushes: dict[str, tuple[float, float]] = {}
+            for _, agent, forward_g, left_g in group:
+                pushes.setdefault(agent, (forward_g, left_g))  # an agent's first impact in the group
+            if len(pushes) >= 2:
                 self.counters.groups += 1
-                out += self._pair(first_ns, agents)
+                out += self._pair(first_ns, sorted(pushes), pushes)
         self.impacts = deque(ordered, maxlen=self.impacts.maxlen)
         self._oldest_impact_ns = None
         return out
@@ -428,7 +441,23 @@ class ChairHub:
         stale_ns = self.settings.stale_s * 1e9
         return any(self.newest_arrival_ns - self.agents[a].arrival_ns <= stale_ns for a in self._short)
 
-    def _pair(self, time_ns: int, agents: list[str]) -> list[Any]:
+    def _push_line(self, a: str, b: str, time_ns: int, pushes: dict[str, tuple[float, float]]
+                   ) -> np.ndarray | bool | None:
+        """The line from b to a that the two impacts' pushes say (unit, court frame), False when they do
+        not point within `PUSH_GATE_COS` of opposite ways as one contact's action and reaction do (two
+        bumps that merely coincide, a ball, a hard push, the floor, point any way), None when unknown."""
+        heading_a, heading_b = self.agents[a].heading_at(time_ns), self.agents[b].heading_at(time_ns)
+        if heading_a is None or heading_b is None:
+            return None
+        push_a, push_b = _court_unit(pushes[a], heading_a), _court_unit(pushes[b], heading_b)
+        if push_a is None or push_b is None:
+            return None
+        if -float(push_a @ push_b) < PUSH_GATE_COS:
+            return False
+        line = push_a - push_b
+        return line / float(np.hypot(*line))
+
+    def _pair(self, time_ns: int, agents: list[str], pushes: dict[str, tuple[float, float]]) -> list[Any]:
         candidates = []
         contact_m, contact_var = self.contact.mean_m(), self.contact.variance_m2()
         for a, b in itertools.combinations(agents, 2):
@@ -443,17 +472,28 @@ class ChairHub:
             var_a, var_b = float(unit @ pose_a[1] @ unit), float(unit @ pose_b[1] @ unit)
             innovation = contact_m - distance
             score = innovation * innovation / (var_a + var_b + contact_var)
-            if score <= CONTACT_GATE_CHI2:
-                candidates.append((score, a, b, unit, innovation, var_a, var_b))
-            else:
+            if score > CONTACT_GATE_CHI2:
                 self.counters.gated_out += 1
+            elif (line := self._push_line(a, b, time_ns, pushes)) is False:
+                self.counters.pushes_not_opposed += 1
+            else:
+                candidates.append((score, a, b, unit, innovation, var_a, var_b, line, delta, pose_a[1], pose_b[1]))
         out, taken = [], set()
-        for score, a, b, unit, innovation, var_a, var_b in sorted(candidates, key=lambda c: c[0]):
+        for score, a, b, unit, innovation, var_a, var_b, line, delta, cov_a, cov_b in sorted(candidates,
+                                                                                               key=lambda c: c[0]):
             if a in taken or b in taken:
                 continue
             taken |= {a, b}
             self.counters.pairs += 1
             self.contact.taken(contact_m - innovation, var_a + var_b)
+            if line is not None:  # the pushes say where the other chair was, along the line and across it
+                across = np.array([-line[1], line[0]])
+                shape = contact_var * np.outer(line, line) + (contact_m * PUSH_LINE_SD) ** 2 * np.outer(across, across)
+                offset = contact_m * line - delta
+                for me, other, measured, noise in ((a, b, offset, cov_b), (b, a, -offset, cov_a)):
+                    out.append(self._send(self.agents[me], time_ns, measured, noise + shape, Kind.COLLISION,
+                                          other=other))
+                continue
             across = np.array([-unit[1], unit[0]])
             for me, other, direction, noise in ((a, b, unit, var_b), (b, a, -unit, var_a)):
                 covariance = (noise + contact_var) * np.outer(direction, direction) + ACROSS_VARIANCE_M2 * np.outer(across, across)
@@ -510,3 +550,13 @@ def _psd(matrix: np.ndarray) -> np.ndarray:
     values, vectors = np.linalg.eigh(0.5 * (matrix + matrix.T))
     return (vectors * np.maximum(values, 0.0)) @ vectors.T
 
+
+
+def _court_unit(push: tuple[float, float], heading: float) -> np.ndarray | None:
+    """A push in the chair frame (forward, left) as a unit vector in the court frame; None if unknown."""
+    forward, left = push
+    size = math.hypot(forward, left)
+    if size == 0.0:
+        return None
+    c, s = math.cos(heading), math.sin(heading)
+    return np.array([c * forward - s * left, s * forward + c * left]) / size

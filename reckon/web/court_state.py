@@ -173,16 +173,21 @@ class ViewState:
                             "received_ns": now_ns, "x": x, "y": y, **extra})
 
     def score(self) -> None:
-        """Error of each agent's latest live pose against truth at its time; into the running mean."""
+        """Error of each agent's newest live pose that truth covers, against truth at its time; into the
+        running mean. Poses and truth come by different routes (through the hub, or not) in either
+        order: a pose ahead of the newest truth waits for it, so both are taken at one instant."""
         for agent in self.agents.values():
-            live = agent.live
-            if live is None or live["t_ns"] == agent.scored_ns:
+            if not agent.truth_history:
                 continue
-            truth = agent.truth_at(live["t_ns"])
+            newest_truth_ns = agent.truth_history[-1][0]
+            live = next((p for p in reversed(agent.pose_history) if p[0] <= newest_truth_ns), None)
+            if live is None or live[0] == agent.scored_ns:
+                continue
+            truth = agent.truth_at(live[0])
             if truth is None:
                 continue
-            agent.scored_ns = live["t_ns"]
-            agent.error_m = math.hypot(live["x"] - truth[0], live["y"] - truth[1])
+            agent.scored_ns = live[0]
+            agent.error_m = math.hypot(live[1] - truth[0], live[2] - truth[1])
             agent.error_sum_m += agent.error_m
             agent.error_count += 1
 

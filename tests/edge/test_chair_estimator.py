@@ -74,6 +74,29 @@ def test_a_gap_in_seat_data_is_bridged_by_the_wheels():
     assert math.degrees(state.mean[HEADING]) == pytest.approx(135.0, abs=2.0)
 
 
+def test_a_silent_seat_is_bridged_by_the_axle_imus_yaw_not_the_scrubbing_wheels():
+    # a 300 deg/s pivot whose wheels scrub: they turn 10 % further apart than the chair turns; the axle
+    # IMUs see the chair's yaw x cos(camber). 1 s with the seat, 0.5 s of bridge samples, then the seat again.
+    cos_camber = math.cos(math.radians(SETTINGS.camber_deg))
+    ratio = wheel_turn_ratio_prior(SETTINGS)
+    wheel = math.radians(300.0) / 200 / ratio / 2 * 1.1
+    def pivot(i, seat=True, every=1):
+        return ChairSample(i * DT_NS, 300.0 if seat else math.nan, -wheel * every, wheel * every,
+                           GRAVITY if seat else (math.nan,) * 3, None, 300.0 / 200 * cos_camber * every)
+    samples = [pivot(i) for i in range(0, 201)] + [pivot(i, seat=False, every=2) for i in range(202, 302, 2)]
+    samples += [pivot(302, every=2)] + [pivot(i) for i in range(303, 311)]
+    state = start(SETTINGS, samples[0], 0.0, 0.0, 0.0)
+    flags = Flag.NONE
+    for s in samples[1:]:
+        state = step(SETTINGS, state, s)
+        flags |= state.flags
+    assert flags & Flag.GAP and not state.flags & Flag.GAP  # bridged, then the seat again
+    turned = 300.0 * 310 / 200
+    assert math.degrees(state.mean[HEADING]) == pytest.approx(turned, abs=1.0)
+    assert state.axis_xy / state.axis_xx == pytest.approx(math.radians(1.0) / cos_camber, rel=1e-3)
+    assert math.isfinite(state.accel_mean_g) and state.accel_mean_g == pytest.approx(1.0)
+
+
 def test_time_going_backwards_is_flagged_not_fatal():
     state = run([sample(i) for i in range(0, 10)])
     again = step(SETTINGS, state, sample(5))
@@ -106,7 +129,7 @@ def test_magnetometer_corrects_a_wrong_gyro_scale():
         return math.degrees(float(np.sqrt(np.mean(np.square(errors)))))
 
     with_mag, without = late_rms_deg(True), late_rms_deg(False)
-    assert with_mag < 4.0
+    assert with_mag < 5.0  # 4.2 deg: until the hall is shown clean, a field beyond mag_trust_sd_deg is trusted less
     assert with_mag < without / 2
 
 
@@ -243,3 +266,14 @@ def test_a_wheel_catching_up_after_lost_packets_does_not_teach_the_turn_ratio():
     catch_up = sample(10, yaw_dps=0.0, left_deg=-250.0, right_deg=250.0)  # 100,000 deg/s: not a real rate
     after = step(SETTINGS, state, catch_up)
     assert after.turn_xy / after.turn_xx == pytest.approx(ratio)
+
+
+@pytest.mark.parametrize("jolt, share", [((7.0, 0.0, 1.0), 1.0), ((0.0, 0.0, 8.0), 0.0), ((3.0, 4.0, 6.0), 0.5)],
+                         ids=["horizontal", "from-below", "half"])
+def test_an_impact_may_shove_the_chair_in_proportion_to_its_horizontal_share(jolt, share):
+    parked = [sample(i) for i in range(0, 200)]
+    before = run(parked)
+    after = step(SETTINGS, before, sample(200, accel=jolt))
+    assert after.flags & Flag.IMPACT
+    added = after.cov[X, X] - before.cov[X, X]
+    assert added == pytest.approx(SETTINGS.impact_shove_sd_m**2 * share, abs=1e-9)

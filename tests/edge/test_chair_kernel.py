@@ -14,8 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from edge.chair.estimator import ChairSample, ChairSettings, ChairState, Flag, start, step
-from edge.chair.kernel import (FLAGS, SAMPLE_WIDTH, STATE_SIZE, V_ACCEL, V_HAS_MAG, V_LEFT, V_MAG, V_RIGHT, V_YAW_RATE,
-                               pack_samples, pack_settings, pack_state, run_batch, step_batch, unpack_state)
+from edge.chair.kernel import (FLAGS, SAMPLE_WIDTH, STATE_SIZE, V_ACCEL, V_HAS_MAG, V_LEFT, V_MAG, V_RIGHT,
+                               V_WHEEL_YAW, V_YAW_RATE, pack_samples, pack_settings, pack_state, run_batch, step_batch,
+                               unpack_state)
 from protocol.session_log import read_session
 from reckon.evaluation.inputs import build_inputs
 from reckon.evaluation.reckon_run import merged_samples
@@ -40,7 +41,7 @@ def chairs(game):
 
 def with_mishaps(samples: list[ChairSample]) -> list[ChairSample]:
     """The game's samples plus what the live path also meets: lost seat packets, time going back,
-    a hard impact, a stretch without magnetometer."""
+    a hard impact, a stretch without magnetometer, a silence of the seat bridged by the wheels."""
     out = list(samples[:1500])
     # 40 seat samples (0.2 s) lost: the wheels' rotation meanwhile arrives with the next one
     lost = samples[1500:1540]
@@ -55,7 +56,15 @@ def with_mishaps(samples: list[ChairSample]) -> list[ChairSample]:
         out.append(replace(s, accel_g=(6.0, 2.0, 1.0)))
     out += samples[3504:4000]
     out += [replace(s, mag_gauss=None) for s in samples[4000:4800]]
-    out += samples[4800:]
+    out += samples[4800:5000]
+    # the seat silent for 0.2 s, bridged by the merger: wheel-only samples every 10 ms
+    for k in range(5000, 5040, 2):
+        pair = samples[k:k + 2]
+        out.append(replace(pair[1], yaw_rate_dps=math.nan, accel_g=(math.nan,) * 3, mag_gauss=None,
+                           left_rotation_deg=sum(s.left_rotation_deg for s in pair),
+                           right_rotation_deg=sum(s.right_rotation_deg for s in pair),
+                           wheel_yaw_deg=sum(s.wheel_yaw_deg for s in pair)))
+    out += samples[5040:]
     return out
 
 
@@ -85,9 +94,10 @@ def assert_same_state(kernel: ChairState, expected: ChairState) -> None:
     scale = np.sqrt(np.outer(np.diag(expected.cov), np.diag(expected.cov)))
     assert np.all(np.abs(kernel.cov - expected.cov) <= 1e-9 * scale)
     scalars = ("yaw_rate_dps", "left_bias_dps", "right_bias_dps", "still_s", "accel_mean_g", "travel_m", "turn_xy",
-               "turn_xx")
+               "turn_xx", "axis_xy", "axis_xx")
     for name in scalars:
-        np.testing.assert_allclose(getattr(kernel, name), getattr(expected, name), err_msg=name, **close)
+        np.testing.assert_allclose(getattr(kernel, name), getattr(expected, name), err_msg=name, equal_nan=True,
+                                   **close)
     np.testing.assert_allclose(kernel.gravity, expected.gravity, **close)
     np.testing.assert_allclose(kernel.mag.fit, expected.mag.fit, **close)
     np.testing.assert_allclose(kernel.mag.due_s, expected.mag.due_s, **close)
@@ -154,7 +164,7 @@ def test_packing_keeps_every_field(chairs):
         assert (back.mag.due_s, back.mag.ready, back.mag.rejections, back.mag.innovation_deg) == (
             original.mag.due_s, original.mag.ready, original.mag.rejections, original.mag.innovation_deg)
         for name in ("yaw_rate_dps", "left_bias_dps", "right_bias_dps", "still_s", "accel_mean_g", "travel_m",
-                     "turn_xy", "turn_xx"):
+                     "turn_xy", "turn_xx", "axis_xy", "axis_xx"):
             assert getattr(back, name) == getattr(original, name)
         np.testing.assert_array_equal(back.mag.stats, original.mag.stats)
         assert original.mag.stats[0] > 0  # the disturbance statistics were in use
@@ -171,6 +181,7 @@ def test_samples_without_magnetometer_pack_as_absent():
     assert values[1, V_MAG:V_MAG + 3].tolist() == [0.2, 0.1, -0.3]
     assert values[0, [V_YAW_RATE, V_LEFT, V_RIGHT]].tolist() == [1.0, 2.0, 3.0]
     assert values[0, V_ACCEL:V_ACCEL + 3].tolist() == [0.0, 0.1, 1.0]
+    assert math.isnan(values[0, V_WHEEL_YAW])  # no axle IMU yaw given
     assert pack_samples([])[1].shape == (0, SAMPLE_WIDTH)
 
 
@@ -191,8 +202,9 @@ def test_an_empty_batch_or_a_backwards_one_changes_nothing_but_the_flag(chairs):
 
 
 def test_state_size_is_fixed_over_a_million_steps():
-    """10^6 synthetic samples (83 min at 200 Hz) with gaps, impacts, a backwards timestamp and a
-    magnetometer that comes and goes: the state is the same fixed-size vector, all finite."""
+    """10^6 synthetic samples (83 min at 200 Hz) with gaps, bridged silences of the seat, impacts, a
+    backwards timestamp and a magnetometer that comes and goes: the state is the same fixed-size
+    vector, all finite."""
     n = 1_000_000
     rng = np.random.default_rng(1)
     i = np.arange(n)
@@ -207,6 +219,7 @@ def test_state_size_is_fixed_over_a_million_steps():
     values[:, V_RIGHT] = 1.2 * moving + 0.4 * pivot
     values[:, V_ACCEL:V_ACCEL + 3] = (0.0, 0.0, 1.0) + rng.normal(0.0, 0.002, (n, 3))
     values[i % 7_919 == 0, V_ACCEL] = 7.0
+    values[:, V_WHEEL_YAW] = values[:, V_YAW_RATE] * 0.005 * math.cos(math.radians(17.0))
     heading = np.cumsum(values[:, V_YAW_RATE]) * 0.005 * math.pi / 180.0
     disturbance = 1.5 * ((i // 40_000) % 5 == 4)  # a steel structure turns the field for 200 s
     values[:, V_MAG] = 0.3 * np.cos(0.7 + disturbance - heading) + 0.05
@@ -214,6 +227,10 @@ def test_state_size_is_fixed_over_a_million_steps():
     values[:, V_MAG + 2] = -0.35
     values[:, V_HAS_MAG] = (i // 30_000) % 3 != 2
     values[values[:, V_HAS_MAG] == 0.0, V_MAG:V_MAG + 3] = np.nan
+    bridged = i % 20_000 < 30  # 0.15 s of wheel-only samples every 100 s
+    values[bridged, V_YAW_RATE] = np.nan
+    values[bridged, V_ACCEL:V_ACCEL + 3] = np.nan
+    values[bridged, V_HAS_MAG] = 0.0
     chair = ChairSettings()
     first = start(chair, ChairSample(int(times[0]) - 5_000_000, 0.0, 0.0, 0.0, (0.0, 0.0, 1.0)), 0.0, 0.0, 0.0)
     vector, flags = run_batch(pack_settings(chair), pack_state(first), times, values)

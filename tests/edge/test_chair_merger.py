@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -114,3 +116,71 @@ def test_a_seat_far_behind_the_wheels_is_counted():
         merger.push(*item)
     merger.flush()
     assert merger.counters.wheel_overrun > 0
+
+
+def yawing_streams(n: int, yaw_dps, camber_deg: float = 17.0, spin_dps: float = 200.0):
+    """A chair turning at `yaw_dps` (or `yaw_dps(i)` at sample i) with both wheels rolling: each axle IMU reads the yaw in its wheel's
+    plane (rotating with the wheel) and gravity's reaction there, as sim_devices' kinematics does; the
+    left one spins about +z, the right one about -y (its plane is x, z)."""
+    cos_c, sin_c = math.cos(math.radians(camber_deg)), math.sin(math.radians(camber_deg))
+    rate = yaw_dps if callable(yaw_dps) else (lambda i: yaw_dps)
+    seat = [("seat", i * DT + 1_000_000, (0.0, 0.0, -1.0), (0.0, 0.0, -rate(i)), None) for i in range(n)]
+    left, right = [], []
+    for i in range(n + 2):
+        yaw_dps = rate(i)
+        a = math.radians(spin_dps) * i * DT * 1e-9
+        for side, out in ((1, left), (-1, right)):
+            gyro_plane = (-side * yaw_dps * cos_c * math.sin(a), -side * yaw_dps * cos_c * math.cos(a))
+            force_plane = (-side * cos_c * math.sin(a), -side * cos_c * math.cos(a))
+            spin = side * spin_dps + yaw_dps * sin_c
+            if side == 1:
+                out.append(("left", i * DT, (*force_plane, sin_c), (*gyro_plane, spin), None))
+            else:
+                out.append(("right", i * DT + 2_000_000, (force_plane[0], -sin_c, force_plane[1]),
+                            (gyro_plane[0], -spin, gyro_plane[1]), None))
+    return seat, left, right
+
+
+@pytest.mark.parametrize("yaw_dps", [300.0, -120.0])
+def test_each_axle_imu_reads_the_chairs_yaw_times_cos_camber_with_its_sign(yaw_dps):
+    seat, left, right = yawing_streams(100, yaw_dps)
+    samples, _ = merge(sorted(seat + left + right, key=lambda s: s[1]))
+    expected = yaw_dps * math.cos(math.radians(17.0)) * 0.005
+    # (the first increment after the anchor starts before the right wheel's first sample)
+    np.testing.assert_allclose([s.wheel_yaw_deg for s in samples[2:]], expected, rtol=1e-6)
+    assert samples[50].yaw_rate_dps == pytest.approx(yaw_dps)  # the same sense as the seat's yaw
+
+
+def test_a_silent_seat_is_bridged_by_wheel_samples_and_nothing_is_lost():
+    seat, left, right = yawing_streams(200, 300.0)
+    del seat[60:120]  # 0.3 s of seat packets lost
+    samples, merger = merge(sorted(seat + left + right, key=lambda s: s[1]))
+    bridges = [s for s in samples if math.isnan(s.yaw_rate_dps)]
+    assert merger.counters.bridged == len(bridges) == 29  # every 10 ms across the 0.305 s silence
+    assert all(math.isnan(s.accel_g[0]) and s.mag_gauss is None for s in bridges)
+    steps = np.diff([s.time_ns for s in samples])
+    assert steps.max() <= 15_000_000 and steps.min() > 0
+    spanned = (samples[-1].time_ns - samples[1].time_ns) * 1e-9  # from where both wheels have reported
+    assert sum(s.wheel_yaw_deg for s in samples[2:]) == pytest.approx(300.0 * math.cos(math.radians(17.0)) * spanned)
+    assert sum(s.left_rotation_deg for s in samples[2:]) == pytest.approx(
+        (200.0 + 300.0 * math.sin(math.radians(17.0))) * spanned)
+
+
+def test_a_wheel_silent_inside_a_bridge_leaves_the_turn_to_the_other():
+    # the chair stops turning for 0.2 s, just while the seat and the left wheel are both silent: the left
+    # wheel's integral would draw a straight 300 deg/s line across its silence
+    seat, left, right = yawing_streams(200, lambda i: 0.0 if 70 <= i < 110 else 300.0)
+    del seat[60:120]
+    del left[70:110]
+    samples, _ = merge(sorted(seat + left + right, key=lambda s: s[1]))
+    inside = [s for s in samples if 72 * DT <= s.time_ns <= 108 * DT]
+    assert len(inside) >= 6 and all(math.isnan(s.yaw_rate_dps) for s in inside)
+    assert all(abs(s.wheel_yaw_deg) < 1e-9 for s in inside)
+
+
+def test_a_device_silent_altogether_gets_no_bridge_samples():
+    seat, left, right = yawing_streams(200, 300.0)
+    del seat[60:120], left[60:120], right[60:120]  # all three sensors silent for 0.3 s
+    samples, merger = merge(sorted(seat + left + right, key=lambda s: s[1]))
+    assert merger.counters.bridged == 0 and not any(math.isnan(s.yaw_rate_dps) for s in samples)
+    assert max(np.diff([s.time_ns for s in samples])) > 0.29e9  # one step across the silence

@@ -23,14 +23,15 @@ def venue(n_agents: int):
     }, where="test")
 
 
-def pose(agent: str, t: int, x: float, y: float, sd: float = 0.5, sequence: int = 0):
+def pose(agent: str, t: int, x: float, y: float, sd: float = 0.5, sequence: int = 0, heading: float = 0.0):
     cov = np.diag([sd * sd, sd * sd, 0.01]).ravel().tolist()
-    return messages.new("EstimatedPose", timestamp_ns=t, agent_id=agent, x_m=x, y_m=y, heading_rad=0.0,
+    return messages.new("EstimatedPose", timestamp_ns=t, agent_id=agent, x_m=x, y_m=y, heading_rad=heading,
                         covariance=cov, method="reckon", track=messages.Track.LIVE, correction_sequence=sequence)
 
 
-def impact(agent: str, t: int, peak: float = 9.0):
-    return messages.new("ImpactEvent", timestamp_ns=t, agent_id=agent, sensor_id=f"{agent}-seat", peak_g=peak)
+def impact(agent: str, t: int, peak: float = 9.0, push: tuple[float, float] = (0.0, 0.0)):
+    return messages.new("ImpactEvent", timestamp_ns=t, agent_id=agent, sensor_id=f"{agent}-seat", peak_g=peak,
+                        forward_g=push[0], left_g=push[1])
 
 
 def send(hub, message):
@@ -45,8 +46,8 @@ def corrections(outputs):
 def feed_poses(hub, positions: dict, start_s: float, end_s: float, rate_hz: float = 50.0):
     out = []
     for t in np.arange(start_s, end_s, 1.0 / rate_hz):
-        for agent, (x, y) in positions.items():
-            out += send(hub, pose(agent, int(t * S), x, y))
+        for agent, (x, y, *heading) in positions.items():
+            out += send(hub, pose(agent, int(t * S), x, y, heading=heading[0] if heading else 0.0))
     return out
 
 
@@ -63,6 +64,37 @@ def test_three_impacts_at_once_pair_the_two_in_contact_by_gating():
     # pulled together along the line: c0 (left) moves right, c1 moves left, by the 0.3 m excess shared
     assert by_agent["c0"].dx_m > 0 > by_agent["c1"].dx_m
     assert by_agent["c0"].other_agent_id == "c1" and by_agent["c0"].kind == Kind.COLLISION
+
+
+@pytest.mark.parametrize("heading_c1, push_c1, paired", [
+    (0.0, (8.0, 1.0), True), (0.0, (-8.0, 0.5), False), (0.0, (0.5, 8.0), False), (np.pi, (-8.0, 0.0), True),
+    (np.pi, (8.0, 0.0), False)], ids=["opposite", "same-way", "across", "facing-back", "facing-back-same-way"])
+def test_two_impacts_are_a_contact_only_if_their_pushes_point_opposite_ways(heading_c1, push_c1, paired):
+    # c0 (heading 0) is pushed back (-x in the court); a contact pushes c1 +x in the court, which is its
+    # own forward when it heads 0 and its backward when it heads pi
+    hub = ChairHub(venue(2), HubSettings(corrections=frozenset({"collision"})))
+    positions = {"c0": (10.0, 5.0), "c1": (11.0, 5.0, heading_c1)}
+    feed_poses(hub, positions, 0.0, 2.0)
+    send(hub, impact("c0", int(2.0 * S), push=(-8.0, -0.5)))
+    send(hub, impact("c1", int(2.0 * S) + 1000, push=push_c1))
+    out = corrections(feed_poses(hub, positions, 2.0, 4.0))
+    assert (hub.counters.pairs, len(out) == 2) == ((1, True) if paired else (0, False))
+    assert hub.counters.pushes_not_opposed == (0 if paired else 1)
+
+
+def test_the_pushes_say_which_side_the_other_chair_was_on():
+    # the estimates have c1 0.9 m to c0's left; the pushes say c1 was in front of it (c0 pushed
+    # back, c1 pushed forward): each chair is moved across the estimates' line, towards the pushes' line
+    hub = ChairHub(venue(2), HubSettings(corrections=frozenset({"collision"})))
+    positions = {"c0": (10.0, 5.0), "c1": (10.3, 5.85)}
+    feed_poses(hub, positions, 0.0, 2.0)
+    send(hub, impact("c0", int(2.0 * S), push=(-8.0, 0.0)))
+    send(hub, impact("c1", int(2.0 * S) + 1000, push=(8.0, 0.0)))
+    by_agent = {c.agent_id: c for c in corrections(feed_poses(hub, positions, 2.0, 4.0))}
+    assert by_agent["c0"].dy_m > 0.1 and by_agent["c1"].dy_m < -0.1  # towards each other's y
+    assert by_agent["c0"].dx_m < 0 < by_agent["c1"].dx_m  # and apart along x, to the contact distance
+    cov = np.array(by_agent["c0"].covariance).reshape(2, 2)
+    assert cov[1, 1] < 1.0  # the constraint holds across the estimates' line, not only along it
 
 
 def test_four_impacts_at_once_give_two_pairs():

@@ -1,0 +1,64 @@
+"""A chair's edge (edge/chair/edge.py) on hand-made batches: what its impact events say."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from edge.base import EdgeSummary
+from edge.chair.edge import ChairEdge
+from protocol import messages
+from protocol.messages import imu_batch
+from protocol.session import Agent, Mount, Sensor
+
+# the seat is mounted backwards and upside down: chair (forward, left, up) = sensor (-x, +y, -z)
+AGENT = Agent("chair01", sensors=(Sensor("left", Mount.LEFT_WHEEL, spin_axis="+z"),
+                                  Sensor("right", Mount.RIGHT_WHEEL, spin_axis="-z"),
+                                  Sensor("seat", Mount.SEAT, forward_axis="-x", left_axis="+y")))
+DT = 5_000_000
+
+
+def batches(seat_accel: np.ndarray, drop_seat: slice = slice(0, 0)):
+    """20-sample batches of a parked chair, in time order; the seat's accelerometer as given (sensor frame)."""
+    n = len(seat_accel)
+    times = np.arange(n, dtype=np.int64) * DT + 1_000_000_000
+    keep = np.ones(n, dtype=bool)
+    keep[drop_seat] = False
+    out = []
+    for start in range(0, n, 20):
+        rows = slice(start, start + 20)
+        for sensor in ("left", "right"):
+            out.append(imu_batch("chair01", sensor, start // 20, times[rows], np.zeros((20, 3)), np.zeros((20, 3)), None))
+        seat_rows = np.arange(start, start + 20)[keep[rows]]
+        if len(seat_rows):
+            out.append(imu_batch("chair01", "seat", start // 20, times[seat_rows], seat_accel[seat_rows],
+                                 np.zeros((len(seat_rows), 3)), None))
+    return out
+
+
+def run(stream):
+    edge = ChairEdge(AGENT)
+    out = []
+    for batch in stream:
+        out += edge.push(batch)
+    return out + edge.flush(), edge
+
+
+def test_an_impact_says_which_way_it_pushed_the_chair():
+    accel = np.tile([0.0, 0.0, -1.0], (400, 1))  # parked, gravity's reaction up (= sensor -z)
+    accel[200:202] = [7.0, 1.0, -1.0]  # the chair pushed backwards and a little to the left
+    events = [m for m in run(batches(accel))[0] if messages.type_name(m) == "ImpactEvent"]
+    assert len(events) == 1
+    (event,) = events
+    assert event.forward_g == pytest.approx(-7.0, abs=1e-3) and event.left_g == pytest.approx(1.0, abs=1e-3)
+    assert event.peak_g == pytest.approx(np.sqrt(51.0) - 1.0, rel=1e-5)
+
+
+def test_a_silent_seat_is_bridged_and_counted():
+    accel = np.tile([0.0, 0.0, -1.0], (400, 1))
+    out, edge = run(batches(accel, drop_seat=slice(100, 160)))  # 0.3 s of seat batches lost
+    summary = EdgeSummary("chair01")
+    edge.summarise(summary)
+    assert summary.bridged == 29 and "29 bridging a silent seat" in str(summary)
+    poses = [m for m in out if messages.type_name(m) == "EstimatedPose"]
+    assert poses and all(np.isfinite([p.x_m, p.y_m, p.heading_rad]).all() for p in poses)
