@@ -109,14 +109,14 @@ class WheelIntegrator:
                 self.yaws[i - 1] + (self.yaws[i] - self.yaws[i - 1]) * w, t1 - t0 <= WHEEL_SILENT_NS)
 
 
-def plane_yaw_dps(gyro: tuple, accel: tuple, spin_index: int) -> float:
+def plane_yaw_dps(gyro: tuple, accel: tuple, plane: tuple[int, int]) -> float:
     """The chair's yaw rate as a wheel IMU sees it, times cos(camber): the in-plane gyro's size, signed by
     its dot product with the in-plane specific force (positive for a left turn, whatever the mounting).
     The size, not the projection on that force: in a pivot the hub's centripetal acceleration tilts the
     force by tens of degrees (measured: the projection reads 2/3 of the turn). The in-plane biases and
     the spin leaking in through a misaligned mounting add to the size; a fit of them on the spin was
     tried and made turns worse (the yaw part does not average out over the wheel's angle in pivots)."""
-    a, b = (k for k in range(3) if k != spin_index)
+    a, b = plane  # the two sensor axes across the spin axis
     size = math.hypot(gyro[a], gyro[b])
     return size if gyro[a] * accel[a] + gyro[b] * accel[b] >= 0.0 else -size
 
@@ -142,6 +142,7 @@ class ChairMerger:
         self.seat_id = seat.id
         self.wheel_ids = {left.id: "left", right.id: "right"}
         self.spin = {left.id: _axis(left.spin_axis), right.id: _axis(right.spin_axis)}
+        self.plane = {sensor: tuple(k for k in range(3) if k != index) for sensor, (index, _) in self.spin.items()}
         self.seat_axes = (_axis(seat.forward_axis), _axis(seat.left_axis), _up_axis(seat.forward_axis, seat.left_axis))
         self.wheels = {"left": WheelIntegrator(), "right": WheelIntegrator()}
         self.pending: deque[tuple[int, float, tuple[float, float, float], tuple[float, float, float] | None]] = deque()
@@ -167,7 +168,7 @@ class ChairMerger:
         if wheel is not None:
             index, sign = self.spin[sensor_id]
             before = self.wheels[wheel].out_of_order
-            self.wheels[wheel].push(time_ns, sign * gyro_dps[index], plane_yaw_dps(gyro_dps, accel_g, index))
+            self.wheels[wheel].push(time_ns, sign * gyro_dps[index], plane_yaw_dps(gyro_dps, accel_g, self.plane[sensor_id]))
             if self.wheels[wheel].out_of_order != before:
                 self.counters.wheel_out_of_order[sensor_id] = self.wheels[wheel].out_of_order
         elif sensor_id == self.seat_id:
@@ -200,15 +201,21 @@ class ChairMerger:
                 self.counters.extrapolated += 1
             if self.last_seat_ns is not None and time_ns - self.last_seat_ns > BRIDGE_AFTER_NS:
                 for bridge_ns in range(self.last_seat_ns + BRIDGE_STEP_NS, time_ns - BRIDGE_STEP_NS // 2, BRIDGE_STEP_NS):
-                    if any(w.at(bridge_ns)[2] for w in self.wheels.values()):  # where a wheel was heard
-                        out.append(self._sample(bridge_ns, math.nan, NAN3, None))
+                    now = self._wheels_at(bridge_ns)
+                    if any(seen for _, _, seen in now.values()):  # where a wheel was heard
+                        out.append(self._sample(bridge_ns, math.nan, NAN3, None, now))
                         self.counters.bridged += 1
-            out.append(self._sample(time_ns, yaw, accel, mag))
+            out.append(self._sample(time_ns, yaw, accel, mag, self._wheels_at(time_ns)))
         return out
 
-    def _sample(self, time_ns: int, yaw: float, accel: tuple, mag: tuple | None) -> ChairSample:
+    def _wheels_at(self, time_ns: int) -> dict[str, tuple[float, float, bool]]:
         now = {name: w.at(time_ns) for name, w in self.wheels.items()}
         self.counters.wheel_overrun = sum(w.overrun for w in self.wheels.values())
+        return now
+
+    def _sample(self, time_ns: int, yaw: float, accel: tuple, mag: tuple | None,
+                now: dict[str, tuple[float, float, bool]]) -> ChairSample:
+        """The sample at `time_ns` with the wheels' increments since the previous one (`now`: `_wheels_at`)."""
         if self.last_seat_ns is None:  # the first sample only anchors the wheel integrals
             turned = {"left": (0.0, 0.0), "right": (0.0, 0.0)}
         else:

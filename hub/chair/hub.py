@@ -442,20 +442,20 @@ class ChairHub:
         return any(self.newest_arrival_ns - self.agents[a].arrival_ns <= stale_ns for a in self._short)
 
     def _push_line(self, a: str, b: str, time_ns: int, pushes: dict[str, tuple[float, float]]
-                   ) -> np.ndarray | bool | None:
-        """The line from b to a that the two impacts' pushes say (unit, court frame), False when they do
-        not point within `PUSH_GATE_COS` of opposite ways as one contact's action and reaction do (two
-        bumps that merely coincide, a ball, a hard push, the floor, point any way), None when unknown."""
+                   ) -> tuple[bool, np.ndarray | None]:
+        """(opposed, line): whether the two impacts' pushes point within `PUSH_GATE_COS` of opposite
+        ways, as one contact's action and reaction do (two bumps that merely coincide, a ball, a hard
+        push, the floor, point any way), and the line from b to a they say (unit, court frame).
+        Unknown pushes: (True, None)."""
         heading_a, heading_b = self.agents[a].heading_at(time_ns), self.agents[b].heading_at(time_ns)
-        if heading_a is None or heading_b is None:
-            return None
-        push_a, push_b = _court_unit(pushes[a], heading_a), _court_unit(pushes[b], heading_b)
+        push_a = None if heading_a is None else _court_unit(pushes[a], heading_a)
+        push_b = None if heading_b is None else _court_unit(pushes[b], heading_b)
         if push_a is None or push_b is None:
-            return None
+            return True, None
         if -float(push_a @ push_b) < PUSH_GATE_COS:
-            return False
+            return False, None
         line = push_a - push_b
-        return line / float(np.hypot(*line))
+        return True, line / float(np.hypot(*line))
 
     def _pair(self, time_ns: int, agents: list[str], pushes: dict[str, tuple[float, float]]) -> list[Any]:
         candidates = []
@@ -474,7 +474,9 @@ class ChairHub:
             score = innovation * innovation / (var_a + var_b + contact_var)
             if score > CONTACT_GATE_CHI2:
                 self.counters.gated_out += 1
-            elif (line := self._push_line(a, b, time_ns, pushes)) is False:
+                continue
+            opposed, line = self._push_line(a, b, time_ns, pushes)
+            if not opposed:
                 self.counters.pushes_not_opposed += 1
             else:
                 candidates.append((score, a, b, unit, innovation, var_a, var_b, line, delta, pose_a[1], pose_b[1]))

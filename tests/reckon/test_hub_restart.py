@@ -211,10 +211,12 @@ def test_a_hub_killed_and_restarted_rebuilds_its_state_and_contradicts_nothing(g
         watcher.wait_for(lambda: state.exists() and len(watcher.items) > 0, "a first snapshot", first_hub)
         first_snapshot = state.stat().st_mtime_ns
         watcher.wait_for(lambda: state.stat().st_mtime_ns != first_snapshot, "a second snapshot", first_hub)
-        seen, second_at = len(watcher.items), time.monotonic()
-        # and past a flush of its recording (every FLUSH_EVERY_S; a loaded machine may be late to one)
-        watcher.wait_for(lambda: len(watcher.items) > seen + 200 and time.monotonic() - second_at > 2 * FLUSH_EVERY_S,
-                         "poses after the snapshot", first_hub)
+        seen, recording = len(watcher.items), tmp_path / "hub.mcap"
+        # and past a whole flush of its recording after it (a loaded machine may be late to one): it grew twice
+        for flush in ("a flush after the snapshot", "a second flush"):
+            flushed = recording.stat().st_size
+            watcher.wait_for(lambda: recording.stat().st_size > flushed, flush, first_hub)
+        watcher.wait_for(lambda: len(watcher.items) > seen + 200, "poses after the snapshot", first_hub)
         first_hub.send_signal(signal.SIGKILL)
         first_hub.wait(WAIT_S)
         killed_at = len(watcher.items)
