@@ -3,8 +3,10 @@
 Each sensor's samples arrive in its own time order (as `ImuBatch` messages or arrays), with any
 interleaving between sensors. Each wheel's forward spin is integrated (trapezoid) into a running
 rotation; every seat sample becomes a `ChairSample` that carries how far each wheel turned since
-the previous seat sample, interpolated at the seat sample's time (device clocks, as the paper
-uses them). So a lost wheel or seat packet loses no distance: the next increment spans it.
+the previous seat sample, interpolated at the seat sample's time. So a lost wheel or seat packet
+loses no distance: the next increment spans it. The three devices keep three clocks: each wheel is
+read at the seat's time plus its clock's offset from the seat's, learned from the chair's yaw that
+both see (`edge/chair/wheel_clock.py`; offsets of tens of ms bridge a pivot's turn wrongly).
 
 Each wheel also integrates the chair's yaw as its axle IMU sees it. The wheel's gyro reads the
 chair's yaw projected on the wheel plane, rotating with the wheel; its size is |yaw| cos(camber)
@@ -35,6 +37,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from edge.chair.estimator import ChairSample
+from edge.chair.wheel_clock import WheelClock
 from protocol.session import Agent, Mount
 
 _INDEX = {"x": 0, "y": 1, "z": 2}
@@ -42,6 +45,7 @@ HISTORY = 1024  # wheel points kept: 5 s at 200 Hz, more than max_wait_s needs
 BRIDGE_AFTER_NS = 50_000_000  # a seat silent this long (10 samples at 200 Hz) is bridged by the wheels
 BRIDGE_STEP_NS = 10_000_000  # at this spacing: a 500 deg/s pivot turns 5 deg per step
 WHEEL_SILENT_NS = 20_000_000  # a wheel's own samples further apart than this: its yaw there is a straight line
+SEAT_STEP_MAX_NS = 7_500_000  # consecutive seat samples (200 Hz) for the clocks' yaw rates
 NAN3 = (math.nan, math.nan, math.nan)
 
 
@@ -145,6 +149,9 @@ class ChairMerger:
         self.plane = {sensor: tuple(k for k in range(3) if k != index) for sensor, (index, _) in self.spin.items()}
         self.seat_axes = (_axis(seat.forward_axis), _axis(seat.left_axis), _up_axis(seat.forward_axis, seat.left_axis))
         self.wheels = {"left": WheelIntegrator(), "right": WheelIntegrator()}
+        self.clocks = {"left": WheelClock(), "right": WheelClock()}  # each wheel's clock minus the seat's
+        self.last_offsets = {"left": 0, "right": 0}
+        self.last_yaw = math.nan
         self.pending: deque[tuple[int, float, tuple[float, float, float], tuple[float, float, float] | None]] = deque()
         self.last_seat_ns: int | None = None
         self.last_rotation = {"left": (0.0, 0.0), "right": (0.0, 0.0)}
@@ -191,8 +198,8 @@ class ChairMerger:
         out = []
         while self.pending:
             time_ns, yaw, accel, mag = self.pending[0]
-            newest = [w.newest_ns for w in self.wheels.values()]
-            covered = all(t is not None and t >= time_ns for t in newest)
+            covered = all(w.newest_ns is not None and w.newest_ns >= time_ns + self.clocks[name].offset_ns
+                          for name, w in self.wheels.items())
             overdue = self.pending[-1][0] - time_ns > self.max_wait_ns
             if not (covered or overdue or flush):
                 break
@@ -209,7 +216,7 @@ class ChairMerger:
         return out
 
     def _wheels_at(self, time_ns: int) -> dict[str, tuple[float, float, bool]]:
-        now = {name: w.at(time_ns) for name, w in self.wheels.items()}
+        now = {name: w.at(time_ns + self.clocks[name].offset_ns) for name, w in self.wheels.items()}
         self.counters.wheel_overrun = sum(w.overrun for w in self.wheels.values())
         return now
 
@@ -221,9 +228,22 @@ class ChairMerger:
         else:
             turned = {name: (now[name][0] - self.last_rotation[name][0], now[name][1] - self.last_rotation[name][1])
                       for name in now}
-        self.last_rotation, self.last_seat_ns = now, time_ns
+            self._align(time_ns - self.last_seat_ns, yaw, now, turned)
+        self.last_rotation, self.last_seat_ns, self.last_yaw = now, time_ns, yaw
         self.counters.samples += 1
         seen = [name for name in now if now[name][2]]
         # a wheel that was silent here knows nothing of the turn: the other one tells it alone
         wheel_yaw = sum(turned[name][1] for name in seen or now) / len(seen or now)
         return ChairSample(time_ns, yaw, turned["left"][0], turned["right"][0], accel, mag, wheel_yaw)
+
+    def _align(self, dt_ns: int, yaw: float, now: dict[str, tuple[float, float, bool]],
+               turned: dict[str, tuple[float, float]]) -> None:
+        """Each wheel clock learns its offset from the seat's yaw and its own over consecutive seat samples."""
+        consecutive = math.isfinite(yaw) and math.isfinite(self.last_yaw) and dt_ns <= SEAT_STEP_MAX_NS
+        for name, clock in self.clocks.items():
+            if not consecutive or not now[name][2] or clock.offset_ns != self.last_offsets[name]:
+                clock.restart()  # a move of the offset, a gap, a silent wheel: the next three start afresh
+            else:
+                dt = dt_ns * 1e-9
+                clock.add(0.5 * (self.last_yaw + yaw), turned[name][1] / dt, dt)
+            self.last_offsets[name] = clock.offset_ns

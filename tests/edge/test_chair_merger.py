@@ -184,3 +184,35 @@ def test_a_device_silent_altogether_gets_no_bridge_samples():
     samples, merger = merge(sorted(seat + left + right, key=lambda s: s[1]))
     assert merger.counters.bridged == 0 and not any(math.isnan(s.yaw_rate_dps) for s in samples)
     assert max(np.diff([s.time_ns for s in samples])) > 0.29e9  # one step across the silence
+
+
+def pivoting(i: int) -> float:
+    """A chair pivoting back and forth (deg/s at sample i): reversals every second or so, as in play."""
+    t = i * DT * 1e-9
+    return 300.0 * math.sin(2.0 * math.pi * 0.7 * t) + 120.0 * math.sin(2.0 * math.pi * 0.23 * t + 1.0)
+
+
+def shifted(stream, offset_ns: int):
+    return [(sensor, t + offset_ns, *rest) for sensor, t, *rest in stream]
+
+
+@pytest.mark.parametrize("left_ns, right_ns", [(80_000_000, -40_000_000), (-120_000_000, 0)])
+def test_each_wheel_clock_is_aligned_to_the_seat_by_the_yaw_both_see(left_ns, right_ns):
+    seat, left, right = yawing_streams(8000, pivoting)  # 40 s
+    # the helper stamps the same instant 1 ms later on the seat and 2 ms later on the right wheel
+    left, right = shifted(left, left_ns), shifted(right, right_ns)
+    samples, merger = merge(sorted(seat + left + right, key=lambda s: s[1]), max_wait_s=2.0)
+    assert merger.clocks["left"].offset_ns == pytest.approx(left_ns - 1_000_000, abs=500_000)
+    assert merger.clocks["right"].offset_ns == pytest.approx(right_ns + 1_000_000, abs=500_000)
+    # aligned, each axle yaw step matches the seat's turn over the same instants
+    late = samples[-2000:-10]
+    seat_turn = np.array([0.5 * (a.yaw_rate_dps + b.yaw_rate_dps) * 0.005 for a, b in zip(late, late[1:])])
+    wheel_turn = np.array([b.wheel_yaw_deg for b in late[1:]]) / math.cos(math.radians(17.0))
+    assert np.abs(wheel_turn - seat_turn).max() < 0.01  # deg per 5 ms step (not aligned: 0.16)
+
+
+def test_a_chair_that_never_turns_leaves_the_wheel_clocks_alone():
+    seat, left, right = yawing_streams(4000, 0.0)
+    samples, merger = merge(sorted(seat + shifted(left, 50_000_000) + right, key=lambda s: s[1]), max_wait_s=2.0)
+    assert merger.clocks["left"].offset_ns == 0 and merger.clocks["left"].updates == 0
+    assert len(samples) == 4000
