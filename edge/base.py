@@ -31,6 +31,7 @@ class EdgeSummary:
     extrapolated: int = 0
     wheel_overrun: int = 0
     bridged: int = 0  # chairs: samples where the seat was silent and the wheels alone told the turn
+    wheel_clocks_ms: tuple[float, float] | None = None  # chairs: (left, right) wheel clock minus the seat's
     final_pose: tuple[float, float, float] | None = None
     swimmer: bool = False
     lengths: int = 0  # swimmers: SwimLength messages out
@@ -49,7 +50,13 @@ class EdgeSummary:
         return (f"edge {self.agent_id}: {self.messages_in} messages in, {self.samples} samples, "
                 f"{self.poses} poses and {self.impacts} impacts out, {self.corrections} corrections applied "
                 f"({self.extrapolated} samples with a wheel extrapolated, {self.wheel_overrun} behind the wheel "
-                f"history, {self.bridged} bridging a silent seat); last pose {pose}")
+                f"history, {self.bridged} bridging a silent seat){self._clocks()}; last pose {pose}")
+
+    def _clocks(self) -> str:
+        if self.wheel_clocks_ms is None:
+            return ""
+        left, right = self.wheel_clocks_ms
+        return f"; wheel clocks against the seat's: left {left:+.1f} ms, right {right:+.1f} ms"
 
 
 class Edge(Protocol):

@@ -77,6 +77,8 @@ class ChairEdge:
         summary.extrapolated = self.merger.counters.extrapolated
         summary.wheel_overrun = self.merger.counters.wheel_overrun
         summary.bridged = self.merger.counters.bridged
+        clocks = self.merger.clocks
+        summary.wheel_clocks_ms = (clocks["left"].offset_ns / 1e6, clocks["right"].offset_ns / 1e6)
         state = self.state
         if state is not None:
             mean = state.mean

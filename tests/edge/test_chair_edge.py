@@ -60,5 +60,8 @@ def test_a_silent_seat_is_bridged_and_counted():
     summary = EdgeSummary("chair01")
     edge.summarise(summary)
     assert summary.bridged == 29 and "29 bridging a silent seat" in str(summary)
+    # a parked chair never turns, so nothing moves the wheels' clocks off the seat's
+    assert summary.wheel_clocks_ms == (0.0, 0.0)
+    assert "wheel clocks against the seat's: left +0.0 ms, right +0.0 ms" in str(summary)
     poses = [m for m in out if messages.type_name(m) == "EstimatedPose"]
     assert poses and all(np.isfinite([p.x_m, p.y_m, p.heading_rad]).all() for p in poses)
