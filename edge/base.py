@@ -32,6 +32,7 @@ class EdgeSummary:
     wheel_overrun: int = 0
     bridged: int = 0  # chairs: samples where the seat was silent and the wheels alone told the turn
     wheel_clocks_ms: tuple[float, float] | None = None  # chairs: (left, right) wheel clock minus the seat's
+    seat_gyro_scale: tuple[float, str] | None = None  # chairs: the seat gyro's scale error (%), how it was checked
     final_pose: tuple[float, float, float] | None = None
     swimmer: bool = False
     lengths: int = 0  # swimmers: SwimLength messages out
@@ -50,13 +51,16 @@ class EdgeSummary:
         return (f"edge {self.agent_id}: {self.messages_in} messages in, {self.samples} samples, "
                 f"{self.poses} poses and {self.impacts} impacts out, {self.corrections} corrections applied "
                 f"({self.extrapolated} samples with a wheel extrapolated, {self.wheel_overrun} behind the wheel "
-                f"history, {self.bridged} bridging a silent seat){self._clocks()}; last pose {pose}")
+                f"history, {self.bridged} bridging a silent seat){self._calibration()}; last pose {pose}")
 
-    def _clocks(self) -> str:
+    def _calibration(self) -> str:
         if self.wheel_clocks_ms is None:
             return ""
         left, right = self.wheel_clocks_ms
-        return f"; wheel clocks against the seat's: left {left:+.1f} ms, right {right:+.1f} ms"
+        text = f"; wheel clocks against the seat's: left {left:+.1f} ms, right {right:+.1f} ms"
+        if self.seat_gyro_scale is not None:
+            text += "; seat gyro scale correction %+.2f %% (%s)" % self.seat_gyro_scale
+        return text
 
 
 class Edge(Protocol):

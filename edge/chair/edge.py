@@ -19,7 +19,7 @@ import numpy as np
 
 from edge.base import EdgeSummary
 from edge.chair import kernel
-from edge.chair.estimator import N, ChairSettings, ChairState, Flag, position_update, start
+from edge.chair.estimator import GYRO_SCALE, N, ChairSettings, ChairState, Flag, position_update, start
 from edge.chair.merger import ChairMerger
 from protocol import messages
 from protocol.session import Agent
@@ -47,6 +47,8 @@ class ChairEdge:
         self.corrections: deque[Any] = deque(maxlen=64)  # the hub sends a few per minute
         self.correction_sequence = 0
         self.samples = self.poses = self.impacts = self.corrections_applied = 0
+        self.axle_check = Flag.NONE  # the seat gyro's one scale check against the axle IMUs, once made
+        self.pending_warnings: list[str] = []
 
     @property
     def state(self) -> ChairState | None:
@@ -69,7 +71,8 @@ class ChairEdge:
         """A chair has no floors to count."""
 
     def warnings(self) -> list[str]:
-        return []
+        out, self.pending_warnings = self.pending_warnings, []
+        return out
 
     def summarise(self, summary: EdgeSummary) -> None:
         summary.samples, summary.poses, summary.impacts = self.samples, self.poses, self.impacts
@@ -83,6 +86,10 @@ class ChairEdge:
         if state is not None:
             mean = state.mean
             summary.final_pose = (float(mean[0]), float(mean[1]), float(mean[2]))
+            check = ("checked against the axles" if self.axle_check & Flag.AXLE_SCALE_USED else
+                     "the axles disagreed, not used" if self.axle_check & Flag.AXLE_SCALE_REJECTED else
+                     "not yet checked against the axles")
+            summary.seat_gyro_scale = (100.0 * float(mean[GYRO_SCALE]), check)
 
     def pose(self, time_ns: int | None = None) -> Any:
         """The current pose as a message (None before the first sample)."""
@@ -132,6 +139,8 @@ class ChairEdge:
                 continue
             self.vector, flags = kernel.run_batch(self.packed_settings, self.vector, times[begin:i + 1],
                                                   values[begin:i + 1])
+            if not self.axle_check:
+                self._note_axle_check(Flag(int(np.bitwise_or.reduce(flags, initial=0))))
             for j in np.flatnonzero(flags & Flag.IMPACT):
                 self.impacts += 1
                 accel = values[begin + j, 3:6]
@@ -145,3 +154,21 @@ class ChairEdge:
                 self.poses += 1
                 out.append(self.pose(time_ns))
         return out
+
+    def _note_axle_check(self, flags: Flag) -> None:
+        """Keep the scale check's outcome; a refused one is the venue file's problem, so say why."""
+        self.axle_check = flags & (Flag.AXLE_SCALE_USED | Flag.AXLE_SCALE_REJECTED)
+        if not self.axle_check & Flag.AXLE_SCALE_REJECTED:
+            return
+        state = kernel.unpack_state(self.vector)
+        axle, mean, cov = state.axle, state.mean, state.cov
+        if axle.xy <= 0.0:
+            found = "the axle IMUs turned against the seat's gyro"
+        else:
+            measured = axle.xx / (axle.xy * math.cos(math.radians(self.settings.camber_deg))) - 1.0
+            found = (f"the axle IMUs' turn put the seat gyro's scale at {100 * measured:+.1f} %, the filter had "
+                     f"{100 * mean[GYRO_SCALE]:+.1f} +- {100 * math.sqrt(cov[GYRO_SCALE, GYRO_SCALE]):.1f} %, "
+                     f"beyond the {self.settings.axle_scale_gate_chi2} chi-square gate")
+        self.pending_warnings.append(
+            f"{self.agent.id}: {found} after {math.degrees(axle.seen_rad):.0f} deg of yaw; not used: check the "
+            f"chair's camber ({self.settings.camber_deg} deg) and the axle IMUs' mounting in the venue file")

@@ -7,7 +7,9 @@ seat-gyro scale error (1), magnetic north in the court frame (rad).
   so a still chair does not creep.
 - Heading from the seat gyro, never from the wheels alone (a 0.5 % left/right radius mismatch is
   0.34 deg per metre, algorithms.md). Its bias is re-estimated whenever the chair is still (a
-  zero-rate update), which the paper's method never does.
+  zero-rate update), which the paper's method never does. Its scale is checked once against the
+  axle IMUs, two more gyros that see the same yaw x cos camber (`_axle_scale`): a chair spins
+  thousands of degrees a game, so 1-2 % of scale is tens of degrees of heading.
 - A lost seat packet would lose the turns made meanwhile (pivots run at 300+ deg/s): across a
   gap the heading change comes from the wheels' axle IMUs, which see the chair's yaw in the
   wheel plane (edge/chair/merger.py: untouched by scrub and skid), times a ratio to the seat
@@ -66,6 +68,8 @@ class Flag(enum.IntFlag):
     IMPACT = 8  # |a| - 1 g rose above impact_g: position variance inflated once per impact
     MAG_USED = 16  # magnetometer update applied
     MAG_REJECTED = 32  # magnetometer disagreed beyond the gate
+    AXLE_SCALE_USED = 64  # the seat gyro's scale measured against the axle IMUs (once per run)
+    AXLE_SCALE_REJECTED = 128  # ... and they disagreed beyond the gate (a wrong camber or mounting): not used
 
 
 @dataclass(frozen=True)
@@ -96,6 +100,10 @@ class ChairSettings:
     wheel_axis_sd: float = 0.02  # ... per radian bridged by the axle IMUs' yaw (ratio learned within ~1 %)
     wheel_axis_bias_dps: float = 1.0  # ... and per second: the in-plane gyro biases (2 axes x 0.5 deg/s), rectified
     wheel_rate_limit_dps: float = 2000.0  # faster "rates" are a wheel catching up after lost packets
+    axle_scale_turn_deg: float = 1440.0  # the seat gyro's scale is checked once the axle IMUs saw this much yaw
+    axle_scale_window_s: float = 1.0  # the seat's and the axles' turns compared over windows this long
+    camber_sd_deg: float = 1.0  # how well the venue file knows the chair's camber (the axles read yaw x cos camber)
+    axle_scale_gate_chi2: float = 6.63  # 99 % for 1 dof
     mag_period_s: float = 0.5  # the magnetometer is read this often (fit and disturbance statistics)
     mag_heading_sd_deg: float = 12.0  # prior of the disturbance's heading SD, until the hall's is learned
     mag_floor_sd_deg: float = 2.0  # never trusted closer than this (noise, soft-iron residual)
@@ -151,6 +159,23 @@ class MagAid:
 
 
 @dataclass(frozen=True)
+class AxleScale:
+    """The seat gyro's turn against the axle IMUs' yaw, for one check of its scale (fixed size).
+
+    Both turns are summed over windows of `axle_scale_window_s` (a wheel clock a few ms off moves
+    a window's turn by little, a single step's by much) and the windows regressed through the
+    origin, until the axles have seen `axle_scale_turn_deg`."""
+
+    window_seat_rad: float  # the seat gyro's turn in the current window, bias removed, before scale
+    window_axle_rad: float  # the axle IMUs' yaw (x cos camber) in it
+    window_s: float
+    xy: float  # sum over windows of seat x axle turn
+    xx: float  # and of axle turn^2
+    seen_rad: float  # and of |axle turn|
+    done: bool  # the check was made (used or rejected)
+
+
+@dataclass(frozen=True)
 class ChairState:
     time_ns: int
     mean: np.ndarray  # (7,)
@@ -169,6 +194,7 @@ class ChairState:
     axis_xy: float  # likewise for the axle IMUs' yaw: sum(gyro turn * wheel yaw)
     axis_xx: float  # and sum(wheel yaw^2)
     mag: MagAid
+    axle: AxleScale
 
 
 def wheel_turn_ratio_prior(settings: ChairSettings) -> float:
@@ -197,7 +223,7 @@ def start(settings: ChairSettings, sample: ChairSample, x_m: float, y_m: float, 
                       False, 0.0, wheel_turn_ratio_prior(settings) * prior_weight, prior_weight,
                       wheel_axis_ratio_prior(settings) * prior_weight, prior_weight,
                       MagAid(np.zeros((4, 4)), 0.0, False, 0, 0.0, np.zeros(MAG_STATS), 0.0, 0.0, math.nan, 0.0, 0.0,
-                             0.0))
+                             0.0), AxleScale(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False))
 
 
 def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> ChairState:
@@ -233,6 +259,7 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
     axis_xy, axis_xx = state.axis_xy, state.axis_xx
     wheel_yaw = sample.wheel_yaw_deg
     gyro_rate = 0.5 * (state.yaw_rate_dps + sample.yaw_rate_dps) * DEG - mean[BIAS]
+    seat_turn = math.nan  # the seat's turn where the axles' is comparable (no gap, no catch-up)
     if flags & Flag.GAP:  # the seat gyro saw nothing in between: the wheels tell the turn
         if math.isfinite(wheel_yaw):
             turn = axis_xy / axis_xx * wheel_yaw
@@ -247,6 +274,7 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
         d_turn_d_bias = -(1.0 + mean[GYRO_SCALE]) * dt
         d_turn_d_scale = gyro_rate * dt
         if max(abs(left_dps), abs(right_dps)) <= settings.wheel_rate_limit_dps:  # not a catch-up after a gap
+            seat_turn = gyro_rate * dt
             forget = math.exp(-dt / settings.wheel_turn_memory_s)
             turn_xy = forget * turn_xy + turn * wheel_difference
             turn_xy_weight = forget * turn_xy_weight + wheel_difference * wheel_difference
@@ -277,12 +305,50 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
         new_mean, new_cov = _scalar_update(new_mean, new_cov, BIAS, 1.0, sample.yaw_rate_dps * DEG - new_mean[BIAS],
                                            (settings.still_rate_sd_dps * DEG) ** 2)
 
+    axle, new_mean, new_cov, axle_flags = _axle_scale(settings, state.axle, seat_turn, wheel_yaw, dt, new_mean, new_cov)
+    flags |= axle_flags
     raw_turn = math.nan if flags & Flag.GAP else 0.5 * (state.yaw_rate_dps + sample.yaw_rate_dps) * DEG * dt
     mag, new_mean, new_cov, mag_flags = _magnetometer(settings, state.mag, sample, gravity, new_mean, new_cov, dt,
                                                       abs(travel), raw_turn)
     return ChairState(sample.time_ns, new_mean, new_cov, sample.yaw_rate_dps, left_bias, right_bias, still_s,
                       accel_mean, gravity, flags | mag_flags, in_impact, state.travel_m + abs(travel), turn_xy,
-                      turn_xy_weight, axis_xy, axis_xx, mag)
+                      turn_xy_weight, axis_xy, axis_xx, mag, axle)
+
+
+def _axle_scale(settings: ChairSettings, axle: AxleScale, seat_turn: float, axle_turn_deg: float, dt: float,
+                mean: np.ndarray, cov: np.ndarray) -> tuple[AxleScale, np.ndarray, np.ndarray, Flag]:
+    """The seat gyro's scale, once, from the turn two independent gyros saw: the axle IMUs.
+
+    A chair spins thousands of degrees a game, one way more than the other, so a scale error of
+    1-2 % is tens of degrees of heading, and in a disturbed hall the field's turn pins it only
+    over minutes. The axle IMUs read the same yaw x cos camber with their own scale errors, as
+    large as the seat's but independent: the seat's turn over theirs measures the seat's scale
+    to the mean of their errors (gyro_scale_sd / sqrt 2) and the camber's (tan c x camber_sd).
+    Their errors are the same every window, so the measurement counts once, not per window.
+    `seat_turn` is NaN where the two are not comparable (a gap, a wheel catching up): the
+    window there is dropped."""
+    if axle.done:
+        return axle, mean, cov, Flag.NONE
+    if not (math.isfinite(seat_turn) and math.isfinite(axle_turn_deg)):
+        return replace(axle, window_seat_rad=0.0, window_axle_rad=0.0, window_s=0.0), mean, cov, Flag.NONE
+    seat_rad, axle_rad = axle.window_seat_rad + seat_turn, axle.window_axle_rad + axle_turn_deg * DEG
+    window_s = axle.window_s + dt
+    if window_s < settings.axle_scale_window_s:
+        return replace(axle, window_seat_rad=seat_rad, window_axle_rad=axle_rad, window_s=window_s), mean, cov, Flag.NONE
+    xy, xx, seen = axle.xy + seat_rad * axle_rad, axle.xx + axle_rad * axle_rad, axle.seen_rad + abs(axle_rad)
+    if seen < settings.axle_scale_turn_deg * DEG:
+        return AxleScale(0.0, 0.0, 0.0, xy, xx, seen, False), mean, cov, Flag.NONE
+    done = AxleScale(0.0, 0.0, 0.0, xy, xx, seen, True)
+    camber = settings.camber_deg * DEG
+    if xy <= 0.0:  # the axles turn against the seat: a mounting the venue file has wrong
+        return done, mean, cov, Flag.AXLE_SCALE_REJECTED
+    measured = xx / (xy * math.cos(camber)) - 1.0  # true turn / seat turn - 1, to the axles' errors
+    noise = settings.gyro_scale_sd**2 / 2.0 + (math.tan(camber) * settings.camber_sd_deg * DEG) ** 2
+    innovation = measured - mean[GYRO_SCALE]
+    if innovation * innovation / (cov[GYRO_SCALE, GYRO_SCALE] + noise) > settings.axle_scale_gate_chi2:
+        return done, mean, cov, Flag.AXLE_SCALE_REJECTED
+    mean, cov = _scalar_update(mean, cov, GYRO_SCALE, 1.0, innovation, noise)
+    return done, mean, cov, Flag.AXLE_SCALE_USED
 
 
 def _magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, gravity: tuple[float, float, float],

@@ -19,6 +19,11 @@ x86-64, Python 3.11, numpy 2.4 with its bundled OpenBLAS 0.3.31), and elsewhere 
 - Python 3.12's sum() of floats is compensated; the kernel sums plainly, as 3.11 does.
 
 The first call compiles (a few seconds); `cache=True` keeps the machine code in __pycache__.
+The compiled code stays in this one file although it is long: numba keys a cached function on
+its own file's time stamp alone (numba issue 1833), so jitted helpers imported from another
+module would run stale after only that module changed. The estimator's index constants read
+here are frozen into the cache the same way; the kernel test (which runs both paths) is what
+notices, and touching this file recompiles.
 
 Flat layouts (all float64): a state vector (`pack_state`, `STATE_SIZE` long, whatever the
 number of steps), a settings vector (`pack_settings`: what `step` reads, with its constant
@@ -37,7 +42,7 @@ from numba.extending import intrinsic
 
 from edge.chair.estimator import (BIAS, DEG, GYRO_SCALE, HEADING, M_DIFF, M_LAST, M_RADIAL, M_RADIUS, M_STEP,
                                   M_WEIGHT, MAG_STATS, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState,
-                                  Flag, MagAid)
+                                  AxleScale, Flag, MagAid)
 
 # --- state vector --------------------------------------------------------------------------
 TIME_HIGH = 0  # time_ns >> 32 and time_ns & 0xFFFFFFFF: each exact in a float64, the whole is not
@@ -69,7 +74,14 @@ MAG_ANCHOR = MAG_SINCE_UPDATE + 1
 MAG_TURN_GYRO = MAG_ANCHOR + 1
 MAG_TURN_S = MAG_TURN_GYRO + 1
 MAG_TURN_M = MAG_TURN_S + 1
-STATE_SIZE = MAG_TURN_M + 1
+AXLE_WINDOW_SEAT = MAG_TURN_M + 1  # AxleScale's fields, in order
+AXLE_WINDOW_AXLE = AXLE_WINDOW_SEAT + 1
+AXLE_WINDOW_S = AXLE_WINDOW_AXLE + 1
+AXLE_XY = AXLE_WINDOW_S + 1
+AXLE_XX = AXLE_XY + 1
+AXLE_SEEN = AXLE_XX + 1
+AXLE_DONE = AXLE_SEEN + 1  # 0 or 1
+STATE_SIZE = AXLE_DONE + 1
 
 # --- settings vector -----------------------------------------------------------------------
 (S_GAP, S_ACCEL_MEAN_TIME, S_STILL_WHEEL, S_STILL_GYRO, S_STILL_ACCEL, S_STILL_TIME, S_HALF_CIRCUMFERENCE,
@@ -78,8 +90,8 @@ STATE_SIZE = MAG_TURN_M + 1
  S_MAG_FIT_FORGET, S_MAG_MIN_SPREAD_SQ, S_MAG_MIN_POINTS, S_MAG_HEADING_VAR, S_MAG_GATE_CHI2,
  S_MAG_RECOVER_REJECTIONS, S_MAG_FLOOR_VAR, S_MAG_LEVEL_WEIGHT, S_MAG_FORGET, S_MAG_MIN_STEP, S_MAG_CORRELATION_PRIOR,
  S_MAG_CORRELATION_MAX, S_MAG_CORRELATION_MIN, S_MAG_TRUST_VAR, S_MAG_TURN_S, S_MAG_TURN_VAR, S_WHEEL_AXIS_SD,
- S_WHEEL_AXIS_BIAS) = range(38)
-SETTINGS_SIZE = S_WHEEL_AXIS_BIAS + 1
+ S_WHEEL_AXIS_BIAS, S_AXLE_TURN, S_AXLE_WINDOW, S_AXLE_COS, S_AXLE_NOISE, S_AXLE_GATE) = range(43)
+SETTINGS_SIZE = S_AXLE_GATE + 1
 
 # --- sample rows ---------------------------------------------------------------------------
 V_YAW_RATE, V_LEFT, V_RIGHT, V_ACCEL, V_MAG, V_HAS_MAG, V_WHEEL_YAW = 0, 1, 2, 3, 6, 9, 10  # accel, mag: 3 each
@@ -87,6 +99,7 @@ SAMPLE_WIDTH = 11
 
 STILL, GAP, BACKWARDS, IMPACT = int(Flag.STILL), int(Flag.GAP), int(Flag.BACKWARDS), int(Flag.IMPACT)
 MAG_USED, MAG_REJECTED = int(Flag.MAG_USED), int(Flag.MAG_REJECTED)
+AXLE_SCALE_USED, AXLE_SCALE_REJECTED = int(Flag.AXLE_SCALE_USED), int(Flag.AXLE_SCALE_REJECTED)
 # rows of the scratch array `run_batch` allocates once: F P's rows X, Y, HEADING; a Kalman gain;
 # h P; the 3 x 5 work of the circle fit's solve
 W_FP, W_GAIN, W_ROW, W_LU, W_ROWS = 0, 3, 4, 5, 8
@@ -135,6 +148,12 @@ def pack_settings(settings: ChairSettings) -> np.ndarray:
     vector[S_MAG_TURN_VAR] = (s.mag_turn_sd_deg * DEG) ** 2
     vector[S_WHEEL_AXIS_SD] = s.wheel_axis_sd
     vector[S_WHEEL_AXIS_BIAS] = s.wheel_axis_bias_dps * DEG
+    camber = s.camber_deg * DEG
+    vector[S_AXLE_TURN] = s.axle_scale_turn_deg * DEG
+    vector[S_AXLE_WINDOW] = s.axle_scale_window_s
+    vector[S_AXLE_COS] = math.cos(camber)
+    vector[S_AXLE_NOISE] = s.gyro_scale_sd**2 / 2.0 + (math.tan(camber) * s.camber_sd_deg * DEG) ** 2
+    vector[S_AXLE_GATE] = s.axle_scale_gate_chi2
     return vector
 
 
@@ -163,6 +182,9 @@ def pack_state(state: ChairState) -> np.ndarray:
     vector[MAG_SINCE_READ], vector[MAG_SINCE_UPDATE] = state.mag.since_read_m, state.mag.since_update_m
     vector[MAG_ANCHOR], vector[MAG_TURN_GYRO] = state.mag.anchor_angle, state.mag.turn_gyro_rad
     vector[MAG_TURN_S], vector[MAG_TURN_M] = state.mag.turn_s, state.mag.turn_m
+    a = state.axle
+    vector[AXLE_WINDOW_SEAT:AXLE_DONE + 1] = (a.window_seat_rad, a.window_axle_rad, a.window_s, a.xy, a.xx, a.seen_rad,
+                                              a.done)
     return vector
 
 
@@ -178,7 +200,8 @@ def unpack_state(vector: np.ndarray) -> ChairState:
                       float(v[YAW_RATE]), float(v[LEFT_BIAS]), float(v[RIGHT_BIAS]), float(v[STILL_S]),
                       float(v[ACCEL_MEAN]), tuple(float(g) for g in v[GRAVITY:GRAVITY + 3]), Flag(int(v[FLAGS])),
                       bool(v[IN_IMPACT]), float(v[TRAVEL]), float(v[TURN_XY]), float(v[TURN_XX]), float(v[AXIS_XY]),
-                      float(v[AXIS_XX]), mag)
+                      float(v[AXIS_XX]), mag,
+                      AxleScale(*(float(x) for x in v[AXLE_WINDOW_SEAT:AXLE_DONE]), bool(v[AXLE_DONE])))
 
 
 def pack_samples(samples: list[ChairSample]) -> tuple[np.ndarray, np.ndarray]:
@@ -298,6 +321,7 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
     wheel_difference = right - left
     wheel_yaw = sample[V_WHEEL_YAW]
     gyro_rate = 0.5 * (st[YAW_RATE] + yaw_rate) * DEG - mean[BIAS]
+    seat_turn = math.nan  # the seat's turn where the axles' is comparable (no gap, no catch-up)
     if flags & GAP:  # the seat gyro saw nothing in between: the wheels tell the turn
         if math.isfinite(wheel_yaw):
             turn = st[AXIS_XY] / st[AXIS_XX] * wheel_yaw
@@ -312,6 +336,7 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
         d_turn_d_bias = -(1.0 + mean[GYRO_SCALE]) * dt
         d_turn_d_scale = gyro_rate * dt
         if max(abs(left_dps), abs(right_dps)) <= s[S_WHEEL_RATE_LIMIT]:  # not a catch-up after a gap
+            seat_turn = gyro_rate * dt
             forget = math.exp(-dt / s[S_WHEEL_TURN_MEMORY])
             st[TURN_XY] = forget * st[TURN_XY] + turn * wheel_difference
             st[TURN_XX] = forget * st[TURN_XX] + wheel_difference * wheel_difference
@@ -339,7 +364,9 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
 
     if still:  # zero-rate update: the seat gyro reads its bias
         flags |= STILL
-        _bias_update(mean, cov, work, yaw_rate * DEG - mean[BIAS], s[S_STILL_RATE_VAR])
+        _scalar_update(mean, cov, work, BIAS, yaw_rate * DEG - mean[BIAS], s[S_STILL_RATE_VAR])
+    if st[AXLE_DONE] == 0.0:
+        flags |= _axle_scale(s, st, mean, cov, work, seat_turn, wheel_yaw, dt)
 
     # the magnetometer aid reads once every mag period; travel and the gyro's turn add up meanwhile
     st[MAG_SINCE_READ] += abs(travel)
@@ -410,17 +437,49 @@ def _propagate_covariance(s, cov, work, c, sn, travel, base_travel, d_turn_d_bia
 
 
 @njit(cache=True, inline='always')
-def _bias_update(mean, cov, work, innovation, noise_var):
-    """The reference's `_scalar_update` for h = e_BIAS: P's column is the gain, its row h P."""
-    variance = cov[BIAS, BIAS] + noise_var
+def _scalar_update(mean, cov, work, index, innovation, noise_var):
+    """The reference's `_scalar_update` for h = e_index: P's column is the gain, its row h P."""
+    variance = cov[index, index] + noise_var
     gain, row = work[W_GAIN], work[W_ROW]
     for i in range(N):
-        gain[i] = cov[i, BIAS] / variance
-        row[i] = cov[BIAS, i]
+        gain[i] = cov[i, index] / variance
+        row[i] = cov[index, i]
     for i in range(N):
         mean[i] += gain[i] * innovation
         for j in range(N):
             cov[i, j] -= gain[i] * row[j]
+
+
+@njit(cache=True)
+def _axle_scale(s, st, mean, cov, work, seat_turn, axle_turn_deg, dt):
+    """The reference's `_axle_scale` (not yet done): the seat gyro's scale, once, against the axle IMUs."""
+    if not (math.isfinite(seat_turn) and math.isfinite(axle_turn_deg)):
+        st[AXLE_WINDOW_SEAT] = 0.0
+        st[AXLE_WINDOW_AXLE] = 0.0
+        st[AXLE_WINDOW_S] = 0.0
+        return 0
+    seat_rad, axle_rad = st[AXLE_WINDOW_SEAT] + seat_turn, st[AXLE_WINDOW_AXLE] + axle_turn_deg * DEG
+    window_s = st[AXLE_WINDOW_S] + dt
+    if window_s < s[S_AXLE_WINDOW]:
+        st[AXLE_WINDOW_SEAT], st[AXLE_WINDOW_AXLE], st[AXLE_WINDOW_S] = seat_rad, axle_rad, window_s
+        return 0
+    st[AXLE_WINDOW_SEAT] = 0.0
+    st[AXLE_WINDOW_AXLE] = 0.0
+    st[AXLE_WINDOW_S] = 0.0
+    st[AXLE_XY] += seat_rad * axle_rad
+    st[AXLE_XX] += axle_rad * axle_rad
+    st[AXLE_SEEN] += abs(axle_rad)
+    if st[AXLE_SEEN] < s[S_AXLE_TURN]:
+        return 0
+    st[AXLE_DONE] = 1.0
+    if st[AXLE_XY] <= 0.0:
+        return AXLE_SCALE_REJECTED
+    measured = st[AXLE_XX] / (st[AXLE_XY] * s[S_AXLE_COS]) - 1.0
+    innovation = measured - mean[GYRO_SCALE]
+    if innovation * innovation / (cov[GYRO_SCALE, GYRO_SCALE] + s[S_AXLE_NOISE]) > s[S_AXLE_GATE]:
+        return AXLE_SCALE_REJECTED
+    _scalar_update(mean, cov, work, GYRO_SCALE, innovation, s[S_AXLE_NOISE])
+    return AXLE_SCALE_USED
 
 
 @njit(cache=True, inline='always')

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import threading
+
 import numpy as np
 import pytest
 
@@ -10,6 +13,9 @@ from edge.chair.edge import ChairEdge
 from protocol import messages
 from protocol.messages import imu_batch
 from protocol.session import Agent, Mount, Sensor
+from protocol.session_log import read_session
+from edge.sources.mcap import mcap_source
+from support.games import Game
 
 # the seat is mounted backwards and upside down: chair (forward, left, up) = sensor (-x, +y, -z)
 AGENT = Agent("chair01", sensors=(Sensor("left", Mount.LEFT_WHEEL, spin_axis="+z"),
@@ -65,3 +71,36 @@ def test_a_silent_seat_is_bridged_and_counted():
     assert "wheel clocks against the seat's: left +0.0 ms, right +0.0 ms" in str(summary)
     poses = [m for m in out if messages.type_name(m) == "EstimatedPose"]
     assert poses and all(np.isfinite([p.x_m, p.y_m, p.heading_rad]).all() for p in poses)
+
+
+def chair_run(games, agent_changes: dict):
+    """A simulated minute of one chair through its edge, the venue file's agent changed by `agent_changes`:
+    (summary, warnings)."""
+    path = games.path(Game(players=1, duration_s=60.0, seed=2))
+    agent = dataclasses.replace(read_session(path).session.agent("chair01"), **agent_changes)
+    edge, warnings = ChairEdge(agent), []
+    for batch in mcap_source(path, "chair01", 0.0, threading.Event()):
+        if messages.type_name(batch) == "ImuBatch":
+            edge.push(batch)
+            warnings += edge.warnings()
+    edge.flush()
+    summary = EdgeSummary("chair01")
+    edge.summarise(summary)
+    return summary, warnings + edge.warnings()
+
+
+def test_the_seat_gyros_scale_is_checked_against_the_axles_once_they_turned(games):
+    summary, warnings = chair_run(games, {})
+    assert warnings == []
+    scale, check = summary.seat_gyro_scale
+    assert check == "checked against the axles" and abs(scale) < 5.0
+    assert f"seat gyro scale correction {scale:+.2f} % (checked against the axles)" in str(summary)
+
+
+def test_a_camber_the_venue_file_has_wrong_is_refused_and_named(games):
+    """The axles read yaw x cos(camber): 40 deg where the chair has 17 makes their turn 20 % short."""
+    summary, warnings = chair_run(games, {"camber_deg": 40.0})
+    assert summary.seat_gyro_scale[1] == "the axles disagreed, not used"
+    (warning,) = warnings
+    assert warning.startswith("chair01: the axle IMUs' turn put the seat gyro's scale at +")
+    assert "chi-square gate" in warning and "camber (40.0 deg)" in warning

@@ -8,7 +8,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from edge.chair.estimator import (BIAS, HEADING, X, Y, ChairSample, ChairSettings, Flag, position_update, start,
+from edge.chair.estimator import (BIAS, GYRO_SCALE, HEADING, X, Y, ChairSample, ChairSettings, Flag, position_update, start,
                                   step, wheel_turn_ratio_prior)
 from hub.chair.corrections import FIX_CLIP_M, BeaconLevels, ContactDistance, contact_update
 from protocol.session import Beacon
@@ -131,6 +131,51 @@ def test_magnetometer_corrects_a_wrong_gyro_scale():
     with_mag, without = late_rms_deg(True), late_rms_deg(False)
     assert with_mag < 5.0  # 4.2 deg: until the hall is shown clean, a field beyond mag_trust_sd_deg is trusted less
     assert with_mag < without / 2
+
+
+def spinning(seconds: float, seat_scale: float, axle_sign: float = 1.0):
+    """A chair spinning left at 120 deg/s, the seat gyro reading `seat_scale` x the truth, the axle IMUs
+    the truth x cos(camber) (x `axle_sign`); no magnetometer, no stop. (samples, true headings)."""
+    cos_camber = math.cos(math.radians(SETTINGS.camber_deg))
+    wheel = math.radians(120.0) / 200 / wheel_turn_ratio_prior(SETTINGS) / 2
+    n = int(seconds * 200)
+    samples = [ChairSample(i * DT_NS, 120.0 * seat_scale, -wheel, wheel, GRAVITY, None,
+                           axle_sign * 120.0 / 200 * cos_camber) for i in range(n)]
+    return samples, [math.radians(120.0) * i / 200 for i in range(n)]
+
+
+def test_the_axle_imus_check_the_seat_gyros_scale_once():
+    """3 % high: once the axles saw four turns, the scale moves by what two independent gyros and the
+    camber's uncertainty allow (prior 2 %, their error 2 % / sqrt 2 and tan c x 1 deg: 64 % of the way)."""
+    samples, truth = spinning(40.0, 1.03)
+    state, flags = start(SETTINGS, samples[0], 0.0, 0.0, 0.0), []
+    for s in samples[1:]:
+        state = step(SETTINGS, state, s)
+        flags.append(state.flags)
+    used = [i for i, f in enumerate(flags) if f & Flag.AXLE_SCALE_USED]
+    assert len(used) == 1 and not any(f & Flag.AXLE_SCALE_REJECTED for f in flags)
+    assert 1440.0 <= 120.0 * used[0] / 200 * math.cos(math.radians(SETTINGS.camber_deg)) < 1440.0 + 120.0
+    prior = SETTINGS.gyro_scale_sd**2
+    axles = prior / 2 + (math.tan(math.radians(SETTINGS.camber_deg)) * math.radians(SETTINGS.camber_sd_deg)) ** 2
+    assert state.mean[GYRO_SCALE] == pytest.approx(prior / (prior + axles) * (1 / 1.03 - 1), rel=1e-3)
+    # after the check the heading drifts at the rest of the error (~1.1 %), without it at all 3 %
+    without = run([ChairSample(s.time_ns, s.yaw_rate_dps, s.left_rotation_deg, s.right_rotation_deg, s.accel_g)
+                   for s in samples])
+    drift_without = math.degrees(without.mean[HEADING] - truth[-1])
+    assert drift_without == pytest.approx(0.03 * 120.0 * 40, rel=0.02)
+    saved = drift_without - math.degrees(state.mean[HEADING] - truth[-1])
+    assert saved > 0.5 * 0.03 * 120.0 * (40 - used[0] / 200)
+
+
+def test_axles_that_turn_against_the_seat_are_refused():
+    """A venue file with an axle IMU's spin axis the wrong way: the check is refused, the scale untouched."""
+    samples, _ = spinning(20.0, 1.03, axle_sign=-1.0)
+    state, flags = start(SETTINGS, samples[0], 0.0, 0.0, 0.0), Flag.NONE
+    for s in samples[1:]:
+        state = step(SETTINGS, state, s)
+        flags |= state.flags
+    assert flags & Flag.AXLE_SCALE_REJECTED and not flags & Flag.AXLE_SCALE_USED
+    assert state.mean[GYRO_SCALE] == 0.0
 
 
 def pivots_then(rest, north=0.7, hard_iron=(0.08, -0.05), bias_dps=0.0, seconds=60, pivot_roll_deg=0.0):

@@ -203,8 +203,8 @@ def test_an_empty_batch_or_a_backwards_one_changes_nothing_but_the_flag(chairs):
 
 def test_state_size_is_fixed_over_a_million_steps():
     """10^6 synthetic samples (83 min at 200 Hz) with gaps, bridged silences of the seat, impacts, a
-    backwards timestamp and a magnetometer that comes and goes: the state is the same fixed-size
-    vector, all finite."""
+    backwards timestamp, a magnetometer that comes and goes and axles that check the seat's scale: the
+    state is the same fixed-size vector, all finite."""
     n = 1_000_000
     rng = np.random.default_rng(1)
     i = np.arange(n)
@@ -239,4 +239,5 @@ def test_state_size_is_fixed_over_a_million_steps():
     assert len(pack_state(unpack_state(vector))) == STATE_SIZE
     assert unpack_state(vector).time_ns == int(times[-1])
     seen = Flag(int(np.bitwise_or.reduce(flags)))
-    assert seen == Flag.STILL | Flag.GAP | Flag.BACKWARDS | Flag.IMPACT | Flag.MAG_USED | Flag.MAG_REJECTED
+    assert seen == (Flag.STILL | Flag.GAP | Flag.BACKWARDS | Flag.IMPACT | Flag.MAG_USED | Flag.MAG_REJECTED
+                    | Flag.AXLE_SCALE_USED)
