@@ -450,7 +450,7 @@ def _scalar_update(mean, cov, work, index, innovation, noise_var):
             cov[i, j] -= gain[i] * row[j]
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _axle_scale(s, st, mean, cov, work, seat_turn, axle_turn_deg, dt):
     """The reference's `_axle_scale` (not yet done): the seat gyro's scale, once, against the axle IMUs."""
     if not (math.isfinite(seat_turn) and math.isfinite(axle_turn_deg)):
