@@ -19,7 +19,8 @@ import numpy as np
 
 from edge.base import EdgeSummary
 from edge.chair import kernel
-from edge.chair.estimator import GYRO_SCALE, N, ChairSettings, ChairState, Flag, position_update, start
+from edge.chair.estimator import (GYRO_SCALE, N, ChairSettings, ChairState, Flag, axle_scale_measured, position_update,
+                                  start)
 from edge.chair.merger import ChairMerger
 from protocol import messages
 from protocol.session import Agent
@@ -139,8 +140,8 @@ class ChairEdge:
                 continue
             self.vector, flags = kernel.run_batch(self.packed_settings, self.vector, times[begin:i + 1],
                                                   values[begin:i + 1])
-            if not self.axle_check:
-                self._note_axle_check(Flag(int(np.bitwise_or.reduce(flags, initial=0))))
+            if not self.axle_check and self.vector[kernel.AXLE_DONE]:  # made in this call: its flag is here
+                self._note_axle_check(Flag(int(np.bitwise_or.reduce(flags))))
             for j in np.flatnonzero(flags & Flag.IMPACT):
                 self.impacts += 1
                 accel = values[begin + j, 3:6]
@@ -165,7 +166,7 @@ class ChairEdge:
         if axle.xy <= 0.0:
             found = "the axle IMUs turned against the seat's gyro"
         else:
-            measured = axle.xx / (axle.xy * math.cos(math.radians(self.settings.camber_deg))) - 1.0
+            measured = axle_scale_measured(self.settings, axle)
             found = (f"the axle IMUs' turn put the seat gyro's scale at {100 * measured:+.1f} %, the filter had "
                      f"{100 * mean[GYRO_SCALE]:+.1f} +- {100 * math.sqrt(cov[GYRO_SCALE, GYRO_SCALE]):.1f} %, "
                      f"beyond the {self.settings.axle_scale_gate_chi2} chi-square gate")

@@ -339,16 +339,24 @@ def _axle_scale(settings: ChairSettings, axle: AxleScale, seat_turn: float, axle
     if seen < settings.axle_scale_turn_deg * DEG:
         return AxleScale(0.0, 0.0, 0.0, xy, xx, seen, False), mean, cov, Flag.NONE
     done = AxleScale(0.0, 0.0, 0.0, xy, xx, seen, True)
-    camber = settings.camber_deg * DEG
     if xy <= 0.0:  # the axles turn against the seat: a mounting the venue file has wrong
         return done, mean, cov, Flag.AXLE_SCALE_REJECTED
-    measured = xx / (xy * math.cos(camber)) - 1.0  # true turn / seat turn - 1, to the axles' errors
-    noise = settings.gyro_scale_sd**2 / 2.0 + (math.tan(camber) * settings.camber_sd_deg * DEG) ** 2
-    innovation = measured - mean[GYRO_SCALE]
+    noise = axle_scale_noise(settings)
+    innovation = axle_scale_measured(settings, done) - mean[GYRO_SCALE]
     if innovation * innovation / (cov[GYRO_SCALE, GYRO_SCALE] + noise) > settings.axle_scale_gate_chi2:
         return done, mean, cov, Flag.AXLE_SCALE_REJECTED
     mean, cov = _scalar_update(mean, cov, GYRO_SCALE, 1.0, innovation, noise)
     return done, mean, cov, Flag.AXLE_SCALE_USED
+
+
+def axle_scale_measured(settings: ChairSettings, axle: AxleScale) -> float:
+    """The seat gyro's scale correction the axles' windows say (true turn / seat turn - 1), to their errors."""
+    return axle.xx / (axle.xy * math.cos(settings.camber_deg * DEG)) - 1.0
+
+
+def axle_scale_noise(settings: ChairSettings) -> float:
+    """That measurement's variance: the two axle gyros' mean scale error and the camber's uncertainty."""
+    return settings.gyro_scale_sd**2 / 2.0 + (math.tan(settings.camber_deg * DEG) * settings.camber_sd_deg * DEG) ** 2
 
 
 def _magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, gravity: tuple[float, float, float],

@@ -42,7 +42,7 @@ from numba.extending import intrinsic
 
 from edge.chair.estimator import (BIAS, DEG, GYRO_SCALE, HEADING, M_DIFF, M_LAST, M_RADIAL, M_RADIUS, M_STEP,
                                   M_WEIGHT, MAG_STATS, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState,
-                                  AxleScale, Flag, MagAid)
+                                  AxleScale, Flag, MagAid, axle_scale_noise)
 
 # --- state vector --------------------------------------------------------------------------
 TIME_HIGH = 0  # time_ns >> 32 and time_ns & 0xFFFFFFFF: each exact in a float64, the whole is not
@@ -148,11 +148,10 @@ def pack_settings(settings: ChairSettings) -> np.ndarray:
     vector[S_MAG_TURN_VAR] = (s.mag_turn_sd_deg * DEG) ** 2
     vector[S_WHEEL_AXIS_SD] = s.wheel_axis_sd
     vector[S_WHEEL_AXIS_BIAS] = s.wheel_axis_bias_dps * DEG
-    camber = s.camber_deg * DEG
     vector[S_AXLE_TURN] = s.axle_scale_turn_deg * DEG
     vector[S_AXLE_WINDOW] = s.axle_scale_window_s
-    vector[S_AXLE_COS] = math.cos(camber)
-    vector[S_AXLE_NOISE] = s.gyro_scale_sd**2 / 2.0 + (math.tan(camber) * s.camber_sd_deg * DEG) ** 2
+    vector[S_AXLE_COS] = math.cos(s.camber_deg * DEG)
+    vector[S_AXLE_NOISE] = axle_scale_noise(s)
     vector[S_AXLE_GATE] = s.axle_scale_gate_chi2
     return vector
 
