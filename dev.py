@@ -2,8 +2,8 @@
 """Set up and run reckon from a fresh clone: `python3 dev.py demo` or `python3 dev.py test`.
 
 Creates `.venv` beside this file on first use (and again when pyproject.toml changes), installs
-reckon with `[test]` (every extra of pyproject.toml plus the test tools), then runs the demo, the
-tests, or any `reckon` subcommand.
+reckon with `[test]` (every extra of pyproject.toml plus the test tools) and compiles the chair
+filter for this machine, then runs the demo, the tests, or any `reckon` subcommand.
 """
 
 from __future__ import annotations
@@ -33,6 +33,8 @@ def ensure_environment() -> None:
     print("dev.py: installing reckon and its dependencies into .venv", file=sys.stderr)
     subprocess.run([str(BIN / "python"), "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
                     "-e", f"{ROOT}[test]"], check=True)
+    # the chair filter, compiled ahead of time for this machine (reckon/kernels.py; else on first use)
+    subprocess.run([str(BIN / "python"), "-m", "reckon.kernels"], check=False)
     STAMP.write_text(wanted)
 
 

@@ -14,7 +14,7 @@
 #   /opt/reckon/venv       a virtual environment with reckon[hub], reckon[edge] or both from this clone
 #   /opt/reckon/src        a copy of this clone's deploy/ folder (the docs the units point to)
 #   /etc/reckon            venue file, zenoh/ configs, tls/ certificates, edge/<agent>.env
-#   /var/lib/reckon        recordings/, spool/, numba-cache/ (the services' only writable place)
+#   /var/lib/reckon        recordings/, spool/ (the services' only writable place)
 #   /etc/systemd/system    reckon-hub.service, reckon-edge@.service, zenohd.service
 #   /etc/logrotate.d/reckon, /etc/systemd/journald.conf.d/reckon.conf (the journal's bounds)
 # Nothing is started: the venue file, certificates and passwords come first. Re-running updates
@@ -56,6 +56,8 @@ python3 -c 'import sys; sys.exit(sys.version_info < (3, 11))' \
 # python3-venv: the venv module; on bookworm it is a separate package
 packages="python3-venv logrotate"
 [ $ble = no ] || packages="$packages bluez"
+# an edge's chair filter is compiled ahead of time at install (reckon/kernels.py): a C compiler and Python's headers
+[ $edge = no ] || packages="$packages gcc python3-dev"
 apt-get install -y --no-install-recommends $packages
 
 if ! getent passwd reckon >/dev/null; then
@@ -73,8 +75,7 @@ install -d -m 0755 "$prefix/src"
 cp -R "$clone/deploy" "$prefix/src/deploy"
 
 install -d -m 0750 -o root -g reckon /etc/reckon /etc/reckon/zenoh /etc/reckon/tls /etc/reckon/edge
-install -d -m 0750 -o reckon -g reckon /var/lib/reckon /var/lib/reckon/recordings /var/lib/reckon/spool \
-    /var/lib/reckon/numba-cache
+install -d -m 0750 -o reckon -g reckon /var/lib/reckon /var/lib/reckon/recordings /var/lib/reckon/spool
 [ -e /etc/reckon/edge/example.env ] || install -m 0640 -o root -g reckon "$clone/deploy/edge/example.env" /etc/reckon/edge/
 
 if [ $units = yes ]; then
@@ -88,4 +89,8 @@ if [ $units = yes ]; then
 fi
 
 "$prefix/venv/bin/reckon" --help >/dev/null
+if [ $edge = yes ]; then
+    # the services cannot write the venv: without this module each chair's edge would compile its filter itself
+    "$prefix/venv/bin/python" -m reckon.kernels || echo "install.sh: the chair filter was not compiled ahead of time; chair edges will compile it at each start (about 150 MiB more each)" >&2
+fi
 echo "installed reckon[$extras] into $prefix/venv; next: deploy/README.md, 'Venue file, certificates, passwords'"

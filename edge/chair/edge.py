@@ -1,7 +1,9 @@
 """One chair's edge computation, without I/O: sensor messages in, pose and impact messages out.
 
-ImuBatch messages of the chair's three sensors -> ChairMerger -> the chair filter
-(edge/chair/estimator.py, run by its compiled batch form edge/chair/kernel.py). A pose leaves on a fixed schedule of the seat clock (`pose_rate_hz`),
+ImuBatch messages of the chair's three sensors -> the merger (edge/chair/merger.py) -> the chair
+filter (edge/chair/estimator.py), both run in their compiled batch forms (edge/chair/merge_kernel.py,
+edge/chair/kernel.py), handed in as `kernels`: reckon/kernels.py loads them ahead-of-time compiled,
+without numba; by default they are compiled just in time, which the tests use. A pose leaves on a fixed schedule of the seat clock (`pose_rate_hz`),
 an ImpactEvent at once. Corrections from the hub (`correct`) are applied before the next sample,
 to the state as it is then: a Correction measures where the chair was at its time, as an offset
 from the pose the hub had for that time, and the few samples since then moved the chair the same
@@ -18,10 +20,10 @@ from typing import Any
 import numpy as np
 
 from edge.base import EdgeSummary
-from edge.chair import kernel
+from edge.chair import layout
 from edge.chair.estimator import (GYRO_SCALE, N, ChairSettings, ChairState, Flag, axle_scale_measured, position_update,
                                   start)
-from edge.chair.merger import ChairMerger
+from edge.chair.merge_layout import PackedMerger
 from protocol import messages
 from protocol.session import Agent
 
@@ -31,18 +33,23 @@ NO_GATE = math.inf  # the hub gated the correction already, against the same pos
 class ChairEdge:
     """`push(batch) -> [EstimatedPose | ImpactEvent]`, `correct(correction)`, `flush()` (an edge.base.Edge)."""
 
-    def __init__(self, agent: Agent, pose_rate_hz: float = 50.0, method: str = "reckon"):
+    def __init__(self, agent: Agent, pose_rate_hz: float = 50.0, method: str = "reckon",
+                 kernels: layout.ChairKernels | None = None):
         if not pose_rate_hz > 0:
             raise ValueError(f"pose_rate_hz {pose_rate_hz}: must be > 0")
         self.agent = agent
         self.settings = ChairSettings(wheel_diameter_m=agent.wheel_diameter_m, camber_deg=agent.camber_deg)
-        self.merger = ChairMerger(agent)
         self.method = method
         self.period_ns = int(1e9 / pose_rate_hz)
-        self.packed_settings = kernel.pack_settings(self.settings)
-        # load (or compile) the kernel now, not on the first sample of a live stream
-        kernel.run_batch(self.packed_settings, np.zeros(kernel.STATE_SIZE), np.zeros(0, dtype=np.int64),
-                         np.zeros((0, kernel.SAMPLE_WIDTH)))
+        self.packed_settings = layout.pack_settings(self.settings)
+        kernels = kernels or layout.just_in_time()
+        self.kernels = kernels
+        self.merger = PackedMerger(agent, kernels.merge_batch)
+        # a first call of each now (just in time: compiles), not on the first sample of a live stream
+        kernels.merge_and_run(*self.merger.arguments(None), self.packed_settings, np.zeros(layout.STATE_SIZE), 0,
+                              self.period_ns)
+        kernels.run_poses(self.packed_settings, np.zeros(layout.STATE_SIZE), np.zeros(0, dtype=np.int64),
+                          np.zeros((0, layout.SAMPLE_WIDTH)), 0, self.period_ns)
         self.vector: np.ndarray | None = None  # the filter state, packed (fixed size)
         self.next_pose_ns = 0
         self.corrections: deque[Any] = deque(maxlen=64)  # the hub sends a few per minute
@@ -53,13 +60,13 @@ class ChairEdge:
 
     @property
     def state(self) -> ChairState | None:
-        return None if self.vector is None else kernel.unpack_state(self.vector)
+        return None if self.vector is None else layout.unpack_state(self.vector)
 
     def push(self, batch: Any) -> list[Any]:
-        return self._estimate(self.merger.push_batch(batch))
+        return self._step(self.merger.arguments(batch))
 
     def flush(self) -> list[Any]:
-        return self._estimate(self.merger.flush())
+        return self._step(self.merger.arguments(None, flush=True))
 
     def correct(self, correction: Any) -> None:
         """Queue a hub Correction; it is applied before the next sample (or with the next pose)."""
@@ -78,11 +85,11 @@ class ChairEdge:
     def summarise(self, summary: EdgeSummary) -> None:
         summary.samples, summary.poses, summary.impacts = self.samples, self.poses, self.impacts
         summary.corrections = self.corrections_applied
-        summary.extrapolated = self.merger.counters.extrapolated
-        summary.wheel_overrun = self.merger.counters.wheel_overrun
-        summary.bridged = self.merger.counters.bridged
-        clocks = self.merger.clocks
-        summary.wheel_clocks_ms = (clocks["left"].offset_ns / 1e6, clocks["right"].offset_ns / 1e6)
+        counters = self.merger.counters
+        summary.extrapolated, summary.wheel_overrun, summary.bridged = (counters.extrapolated, counters.wheel_overrun,
+                                                                        counters.bridged)
+        left_ns, right_ns = self.merger.clock_offsets_ns
+        summary.wheel_clocks_ms = (left_ns / 1e6, right_ns / 1e6)
         state = self.state
         if state is not None:
             mean = state.mean
@@ -92,76 +99,77 @@ class ChairEdge:
                      "not yet checked against the axles")
             summary.seat_gyro_scale = (100.0 * float(mean[GYRO_SCALE]), check)
 
-    def pose(self, time_ns: int | None = None) -> Any:
-        """The current pose as a message (None before the first sample)."""
-        if self.vector is None:
-            return None
-        self._apply_corrections()
-        v = self.vector
-        mean = v[kernel.MEAN:kernel.MEAN + 3]
-        cov = v[kernel.COV:kernel.COV + N * N].reshape(N, N)[:3, :3]
-        return messages.new(
-            "EstimatedPose", timestamp_ns=kernel.state_time_ns(v) if time_ns is None else time_ns,
-            agent_id=self.agent.id, x_m=float(mean[0]), y_m=float(mean[1]), heading_rad=float(mean[2]),
-            covariance=cov.ravel().tolist(), method=self.method, track=messages.Track.LIVE,
-            correction_sequence=self.correction_sequence)
-
     def _apply_corrections(self) -> None:
         while self.corrections and self.vector is not None:
             correction = self.corrections.popleft()
             if correction.sequence <= self.correction_sequence:
                 continue  # a duplicate (the hub resends after a restart)
-            state = kernel.unpack_state(self.vector)
+            state = layout.unpack_state(self.vector)
             shift = np.array([correction.dx_m, correction.dy_m])
             covariance = np.array(correction.covariance, dtype=float).reshape(2, 2)
             state, _ = position_update(state, state.mean[:2] + shift, covariance, NO_GATE)
-            self.vector = kernel.pack_state(state)
+            self.vector = layout.pack_state(state)
             self.correction_sequence = correction.sequence
             self.corrections_applied += 1
 
-    def _estimate(self, samples: list) -> list[Any]:
-        out: list[Any] = []
-        if not samples:
-            return out
-        if self.vector is None:
-            first = samples[0]
-            self.vector = kernel.pack_state(start(self.settings, first, self.agent.start_x_m, self.agent.start_y_m,
-                                                  self.agent.start_heading_rad))
-            self.samples += 1
-            samples = samples[1:]
-            if not samples:
-                return out
+    def _step(self, merge_arguments: tuple) -> list[Any]:
+        """One batch merged and its samples through the filter, a pose at each pose time; until the
+        filter has started (its first merged sample), the two steps apart."""
+        if self.vector is not None:
+            self._apply_corrections()
+            merged, *ran = self.kernels.merge_and_run(*merge_arguments, self.packed_settings, self.vector,
+                                                     self.next_pose_ns, self.period_ns)
+            self.samples += merged
+            return self._publish(*ran)
+        times, values = self.kernels.merge_batch(*merge_arguments)
+        if not len(times):
+            return []
+        first = layout.unpack_sample(times[0], values[0])
+        self.vector = layout.pack_state(start(self.settings, first, self.agent.start_x_m, self.agent.start_y_m,
+                                              self.agent.start_heading_rad))
+        self.samples += len(times)
         self._apply_corrections()
-        times, values = kernel.pack_samples(samples)
-        self.samples += len(samples)
-        begin = 0
-        for i, time_ns in enumerate(times.tolist()):  # run up to each pose, then publish it
-            if time_ns < self.next_pose_ns and i < len(samples) - 1:
-                continue
-            self.vector, flags = kernel.run_batch(self.packed_settings, self.vector, times[begin:i + 1],
-                                                  values[begin:i + 1])
-            if not self.axle_check and self.vector[kernel.AXLE_DONE]:  # made in this call: its flag is here
-                self._note_axle_check(Flag(int(np.bitwise_or.reduce(flags))))
-            for j in np.flatnonzero(flags & Flag.IMPACT):
-                self.impacts += 1
-                accel = values[begin + j, 3:6]
-                gravity = self.vector[kernel.GRAVITY:kernel.GRAVITY + 3]
-                out.append(messages.new("ImpactEvent", timestamp_ns=int(times[begin + j]), agent_id=self.agent.id,
-                                        sensor_id=self.merger.seat_id, peak_g=float(np.sqrt(accel @ accel) - 1.0),
-                                        forward_g=float(accel[0] - gravity[0]), left_g=float(accel[1] - gravity[1])))
-            begin = i + 1
-            if time_ns >= self.next_pose_ns:  # a fixed schedule: timestamp jitter costs no pose
-                self.next_pose_ns = max(self.next_pose_ns + self.period_ns, time_ns - self.period_ns // 2)
-                self.poses += 1
-                out.append(self.pose(time_ns))
+        return self._publish(*self.kernels.run_poses(self.packed_settings, self.vector, times[1:], values[1:],
+                                                     self.next_pose_ns, self.period_ns))
+
+    def _publish(self, vector: np.ndarray, flags: int, next_pose_ns: int, pose_times: np.ndarray, poses: np.ndarray,
+                 impact_times: np.ndarray, impacts: np.ndarray) -> list[Any]:
+        """`run_poses`' results into the state and out as messages."""
+        out: list[Any] = []
+        self.vector, self.next_pose_ns = vector, next_pose_ns
+        if not self.axle_check and self.vector[layout.AXLE_DONE]:  # made in this call: its flag is here
+            self._note_axle_check(Flag(int(flags)))
+        hit = 0  # an impact goes out before the pose its run ended with, as it happened before it
+        for time_ns, pose in zip(pose_times.tolist(), poses.tolist()):
+            while hit < len(impact_times) and impact_times[hit] <= time_ns:
+                out.append(self._impact(int(impact_times[hit]), impacts[hit]))
+                hit += 1
+            out.append(self._pose_message(time_ns, pose))
+        out += [self._impact(int(impact_times[k]), impacts[k]) for k in range(hit, len(impact_times))]
+        self.poses += len(pose_times)
+        self.impacts += len(impact_times)
         return out
+
+    def _pose_message(self, time_ns: int, pose: list[float]) -> Any:
+        """A `run_poses` row (x, y, heading, covariance 3 x 3) as the EstimatedPose it stands for."""
+        return messages.EstimatedPose(
+            schema_version=messages.SCHEMA_VERSION, timestamp_ns=time_ns, agent_id=self.agent.id, x_m=pose[0],
+            y_m=pose[1], heading_rad=pose[2], covariance=pose[3:], method=self.method, track=messages.Track.LIVE,
+            correction_sequence=self.correction_sequence)
+
+    def _impact(self, time_ns: int, row: np.ndarray) -> Any:
+        """A `run_poses` impact row (accel, gravity then) as its ImpactEvent: the push without gravity."""
+        accel, gravity = row[:3], row[3:]
+        return messages.new("ImpactEvent", timestamp_ns=time_ns, agent_id=self.agent.id, sensor_id=self.merger.seat_id,
+                            peak_g=float(np.sqrt(accel @ accel) - 1.0), forward_g=float(accel[0] - gravity[0]),
+                            left_g=float(accel[1] - gravity[1]))
 
     def _note_axle_check(self, flags: Flag) -> None:
         """Keep the scale check's outcome; a refused one is the venue file's problem, so say why."""
         self.axle_check = flags & (Flag.AXLE_SCALE_USED | Flag.AXLE_SCALE_REJECTED)
         if not self.axle_check & Flag.AXLE_SCALE_REJECTED:
             return
-        state = kernel.unpack_state(self.vector)
+        state = layout.unpack_state(self.vector)
         axle, mean, cov = state.axle, state.mean, state.cov
         if axle.xy <= 0.0:
             found = "the axle IMUs turned against the seat's gyro"

@@ -1,10 +1,10 @@
 """The per-chair filter compiled for throughput: `step` of edge/chair/estimator.py over a whole batch at once.
 
 Why: one Python `step` costs ~17 us (~60k samples/s), and the edge estimator's target in replay
-is >= 1 M samples/s per core. `run_batch` is a numba loop over flat arrays, with no allocation
-per sample, that does what calling `step` once per sample does: the same math in the same
-order (zero-rate update, gap bridging by the wheels, impact shove, BACKWARDS samples,
-the magnetometer aid). edge/chair/estimator.py's `step` stays the readable reference: change the filter
+is >= 1 M samples/s per core. `run_batch` is a numba loop over flat arrays (edge/chair/layout.py),
+with no allocation per sample, that does what calling `step` once per sample does: the same math in
+the same order (zero-rate update, gap bridging by the wheels, impact shove, BACKWARDS samples, the
+magnetometer aid). edge/chair/estimator.py's `step` stays the readable reference: change the filter
 there first, then here; tests/edge/test_chair_kernel.py holds the kernel to it.
 
 Same operations in the same order round the same, so the two agree bit for bit (measured on
@@ -18,17 +18,11 @@ x86-64, Python 3.11, numpy 2.4 with its bundled OpenBLAS 0.3.31), and elsewhere 
 - The eigenvalue check repeats LAPACK's 2x2 formula (dlae2), as numpy's eigvalsh runs it.
 - Python 3.12's sum() of floats is compensated; the kernel sums plainly, as 3.11 does.
 
-The first call compiles (a few seconds); `cache=True` keeps the machine code in __pycache__.
-The compiled code stays in this one file although it is long: numba keys a cached function on
-its own file's time stamp alone (numba issue 1833), so jitted helpers imported from another
-module would run stale after only that module changed. The estimator's index constants read
-here are frozen into the cache the same way; the kernel test (which runs both paths) is what
-notices, and touching this file recompiles.
-
-Flat layouts (all float64): a state vector (`pack_state`, `STATE_SIZE` long, whatever the
-number of steps), a settings vector (`pack_settings`: what `step` reads, with its constant
-sub-expressions evaluated once in Python exactly as `step` writes them), and per sample one
-int64 time plus a row of `SAMPLE_WIDTH` values (`pack_samples`).
+How it runs: the edge, `reckon eval` and the bench load it ahead-of-time compiled (numba.pycc, built
+once per source and machine by reckon/kernels.py), so their processes never import numba (some
+150 MiB and seconds of start-up). Importing this module compiles just in time instead (the tests,
+and a machine without a C compiler); no on-disk cache, since numba's would key on this file alone
+and miss a change to the layout's or the estimator's constants frozen into the machine code.
 """
 
 from __future__ import annotations
@@ -41,177 +35,10 @@ from numba import njit, types
 from numba.extending import intrinsic
 
 from edge.chair.estimator import (BIAS, DEG, GYRO_SCALE, HEADING, M_DIFF, M_LAST, M_RADIAL, M_RADIUS, M_STEP,
-                                  M_WEIGHT, MAG_STATS, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState,
-                                  AxleScale, Flag, MagAid, axle_scale_noise)
-
-# --- state vector --------------------------------------------------------------------------
-TIME_HIGH = 0  # time_ns >> 32 and time_ns & 0xFFFFFFFF: each exact in a float64, the whole is not
-TIME_LOW = 1
-MEAN = 2  # N values
-COV = MEAN + N  # N * N values, row-major
-YAW_RATE = COV + N * N
-LEFT_BIAS = YAW_RATE + 1
-RIGHT_BIAS = LEFT_BIAS + 1
-STILL_S = RIGHT_BIAS + 1
-ACCEL_MEAN = STILL_S + 1
-GRAVITY = ACCEL_MEAN + 1  # 3 values
-FLAGS = GRAVITY + 3
-IN_IMPACT = FLAGS + 1  # 0 or 1
-TRAVEL = IN_IMPACT + 1
-TURN_XY = TRAVEL + 1
-TURN_XX = TURN_XY + 1
-AXIS_XY = TURN_XX + 1
-AXIS_XX = AXIS_XY + 1
-MAG_FIT = AXIS_XX + 1  # 4 x 4 moments, row-major
-MAG_DUE = MAG_FIT + 16
-MAG_READY = MAG_DUE + 1  # 0 or 1
-MAG_REJECTIONS = MAG_READY + 1
-MAG_INNOVATION = MAG_REJECTIONS + 1
-MAG_STATS_AT = MAG_INNOVATION + 1  # MAG_STATS values, MagAid.stats
-MAG_SINCE_READ = MAG_STATS_AT + MAG_STATS
-MAG_SINCE_UPDATE = MAG_SINCE_READ + 1
-MAG_ANCHOR = MAG_SINCE_UPDATE + 1
-MAG_TURN_GYRO = MAG_ANCHOR + 1
-MAG_TURN_S = MAG_TURN_GYRO + 1
-MAG_TURN_M = MAG_TURN_S + 1
-AXLE_WINDOW_SEAT = MAG_TURN_M + 1  # AxleScale's fields, in order
-AXLE_WINDOW_AXLE = AXLE_WINDOW_SEAT + 1
-AXLE_WINDOW_S = AXLE_WINDOW_AXLE + 1
-AXLE_XY = AXLE_WINDOW_S + 1
-AXLE_XX = AXLE_XY + 1
-AXLE_SEEN = AXLE_XX + 1
-AXLE_DONE = AXLE_SEEN + 1  # 0 or 1
-STATE_SIZE = AXLE_DONE + 1
-
-# --- settings vector -----------------------------------------------------------------------
-(S_GAP, S_ACCEL_MEAN_TIME, S_STILL_WHEEL, S_STILL_GYRO, S_STILL_ACCEL, S_STILL_TIME, S_HALF_CIRCUMFERENCE,
- S_WHEEL_BIAS_TIME, S_WHEEL_TURN_SD, S_GYRO_NOISE_VAR, S_WHEEL_RATE_LIMIT, S_WHEEL_TURN_MEMORY, S_IMPACT_G,
- S_ALONG_SD, S_ACROSS_SD, S_SHOVE_VAR, S_BIAS_WALK_VAR, S_SCALE_WALK_VAR, S_STILL_RATE_VAR, S_MAG_PERIOD,
- S_MAG_FIT_FORGET, S_MAG_MIN_SPREAD_SQ, S_MAG_MIN_POINTS, S_MAG_HEADING_VAR, S_MAG_GATE_CHI2,
- S_MAG_RECOVER_REJECTIONS, S_MAG_FLOOR_VAR, S_MAG_LEVEL_WEIGHT, S_MAG_FORGET, S_MAG_MIN_STEP, S_MAG_CORRELATION_PRIOR,
- S_MAG_CORRELATION_MAX, S_MAG_CORRELATION_MIN, S_MAG_TRUST_VAR, S_MAG_TURN_S, S_MAG_TURN_VAR, S_WHEEL_AXIS_SD,
- S_WHEEL_AXIS_BIAS, S_AXLE_TURN, S_AXLE_WINDOW, S_AXLE_COS, S_AXLE_NOISE, S_AXLE_GATE) = range(43)
-SETTINGS_SIZE = S_AXLE_GATE + 1
-
-# --- sample rows ---------------------------------------------------------------------------
-V_YAW_RATE, V_LEFT, V_RIGHT, V_ACCEL, V_MAG, V_HAS_MAG, V_WHEEL_YAW = 0, 1, 2, 3, 6, 9, 10  # accel, mag: 3 each
-SAMPLE_WIDTH = 11
-
-STILL, GAP, BACKWARDS, IMPACT = int(Flag.STILL), int(Flag.GAP), int(Flag.BACKWARDS), int(Flag.IMPACT)
-MAG_USED, MAG_REJECTED = int(Flag.MAG_USED), int(Flag.MAG_REJECTED)
-AXLE_SCALE_USED, AXLE_SCALE_REJECTED = int(Flag.AXLE_SCALE_USED), int(Flag.AXLE_SCALE_REJECTED)
-# rows of the scratch array `run_batch` allocates once: F P's rows X, Y, HEADING; a Kalman gain;
-# h P; the 3 x 5 work of the circle fit's solve
-W_FP, W_GAIN, W_ROW, W_LU, W_ROWS = 0, 3, 4, 5, 8
-LAPACK_EPS = 2.0**-53  # dlamch('E'): relative machine precision as LAPACK defines it
-
-
-def pack_settings(settings: ChairSettings) -> np.ndarray:
-    """What `step` reads of the settings; each constant expression written exactly as in `step`."""
-    s = settings
-    vector = np.zeros(SETTINGS_SIZE)
-    vector[S_GAP] = s.gap_s
-    vector[S_ACCEL_MEAN_TIME] = s.accel_mean_time_s
-    vector[S_STILL_WHEEL] = s.still_wheel_dps
-    vector[S_STILL_GYRO] = s.still_gyro_dps
-    vector[S_STILL_ACCEL] = s.still_accel_g
-    vector[S_STILL_TIME] = s.still_time_s
-    vector[S_HALF_CIRCUMFERENCE] = math.pi * s.wheel_diameter_m * 0.5
-    vector[S_WHEEL_BIAS_TIME] = s.wheel_bias_time_s
-    vector[S_WHEEL_TURN_SD] = s.wheel_turn_sd
-    vector[S_GYRO_NOISE_VAR] = (s.gyro_noise_dps_per_sqrt_hz * DEG) ** 2
-    vector[S_WHEEL_RATE_LIMIT] = s.wheel_rate_limit_dps
-    vector[S_WHEEL_TURN_MEMORY] = s.wheel_turn_memory_s
-    vector[S_IMPACT_G] = s.impact_g
-    vector[S_ALONG_SD] = s.along_track_sd_per_m
-    vector[S_ACROSS_SD] = s.cross_track_sd_per_m
-    vector[S_SHOVE_VAR] = s.impact_shove_sd_m**2
-    vector[S_BIAS_WALK_VAR] = (s.gyro_bias_walk_dps_per_sqrt_s * DEG) ** 2
-    vector[S_SCALE_WALK_VAR] = s.wheel_scale_walk_per_sqrt_s**2
-    vector[S_STILL_RATE_VAR] = (s.still_rate_sd_dps * DEG) ** 2
-    vector[S_MAG_PERIOD] = s.mag_period_s
-    vector[S_MAG_FIT_FORGET] = math.exp(-s.mag_period_s / s.mag_fit_memory_s)
-    vector[S_MAG_MIN_SPREAD_SQ] = s.mag_fit_min_spread**2
-    vector[S_MAG_MIN_POINTS] = s.mag_fit_min_points
-    vector[S_MAG_HEADING_VAR] = (s.mag_heading_sd_deg * DEG) ** 2
-    vector[S_MAG_GATE_CHI2] = s.mag_gate_chi2
-    vector[S_MAG_RECOVER_REJECTIONS] = s.mag_recover_rejections
-    vector[S_MAG_FLOOR_VAR] = (s.mag_floor_sd_deg * DEG) ** 2
-    vector[S_MAG_LEVEL_WEIGHT] = s.mag_level_weight
-    vector[S_MAG_FORGET] = 1.0 - 1.0 / s.mag_level_memory
-    vector[S_MAG_MIN_STEP] = s.mag_min_step_m
-    vector[S_MAG_CORRELATION_PRIOR] = s.mag_correlation_prior_m
-    vector[S_MAG_CORRELATION_MAX] = s.mag_correlation_max_m
-    vector[S_MAG_CORRELATION_MIN] = s.mag_correlation_min_m
-    vector[S_MAG_TRUST_VAR] = (s.mag_trust_sd_deg * DEG) ** 2
-    vector[S_MAG_TURN_S] = s.mag_turn_s
-    vector[S_MAG_TURN_VAR] = (s.mag_turn_sd_deg * DEG) ** 2
-    vector[S_WHEEL_AXIS_SD] = s.wheel_axis_sd
-    vector[S_WHEEL_AXIS_BIAS] = s.wheel_axis_bias_dps * DEG
-    vector[S_AXLE_TURN] = s.axle_scale_turn_deg * DEG
-    vector[S_AXLE_WINDOW] = s.axle_scale_window_s
-    vector[S_AXLE_COS] = math.cos(s.camber_deg * DEG)
-    vector[S_AXLE_NOISE] = axle_scale_noise(s)
-    vector[S_AXLE_GATE] = s.axle_scale_gate_chi2
-    return vector
-
-
-def pack_state(state: ChairState) -> np.ndarray:
-    """Everything in a ChairState as `STATE_SIZE` float64s (`unpack_state` is the inverse)."""
-    vector = np.zeros(STATE_SIZE)
-    vector[TIME_HIGH], vector[TIME_LOW] = state.time_ns >> 32, state.time_ns & 0xFFFFFFFF
-    vector[MEAN:MEAN + N] = state.mean
-    vector[COV:COV + N * N] = np.asarray(state.cov, dtype=float).ravel()
-    vector[YAW_RATE] = state.yaw_rate_dps
-    vector[LEFT_BIAS], vector[RIGHT_BIAS] = state.left_bias_dps, state.right_bias_dps
-    vector[STILL_S] = state.still_s
-    vector[ACCEL_MEAN] = state.accel_mean_g
-    vector[GRAVITY:GRAVITY + 3] = state.gravity
-    vector[FLAGS] = int(state.flags)
-    vector[IN_IMPACT] = state.in_impact
-    vector[TRAVEL] = state.travel_m
-    vector[TURN_XY], vector[TURN_XX] = state.turn_xy, state.turn_xx
-    vector[AXIS_XY], vector[AXIS_XX] = state.axis_xy, state.axis_xx
-    vector[MAG_FIT:MAG_FIT + 16] = np.asarray(state.mag.fit, dtype=float).ravel()
-    vector[MAG_DUE] = state.mag.due_s
-    vector[MAG_READY] = state.mag.ready
-    vector[MAG_REJECTIONS] = state.mag.rejections
-    vector[MAG_INNOVATION] = state.mag.innovation_deg
-    vector[MAG_STATS_AT:MAG_STATS_AT + MAG_STATS] = state.mag.stats
-    vector[MAG_SINCE_READ], vector[MAG_SINCE_UPDATE] = state.mag.since_read_m, state.mag.since_update_m
-    vector[MAG_ANCHOR], vector[MAG_TURN_GYRO] = state.mag.anchor_angle, state.mag.turn_gyro_rad
-    vector[MAG_TURN_S], vector[MAG_TURN_M] = state.mag.turn_s, state.mag.turn_m
-    a = state.axle
-    vector[AXLE_WINDOW_SEAT:AXLE_DONE + 1] = (a.window_seat_rad, a.window_axle_rad, a.window_s, a.xy, a.xx, a.seen_rad,
-                                              a.done)
-    return vector
-
-
-def unpack_state(vector: np.ndarray) -> ChairState:
-    if vector.shape != (STATE_SIZE,):
-        raise ValueError(f"a packed chair state has {STATE_SIZE} values, not shape {vector.shape}")
-    v = vector
-    mag = MagAid(v[MAG_FIT:MAG_FIT + 16].reshape(4, 4).copy(), float(v[MAG_DUE]), bool(v[MAG_READY]),
-                 int(v[MAG_REJECTIONS]), float(v[MAG_INNOVATION]), v[MAG_STATS_AT:MAG_STATS_AT + MAG_STATS].copy(),
-                 float(v[MAG_SINCE_READ]), float(v[MAG_SINCE_UPDATE]), float(v[MAG_ANCHOR]), float(v[MAG_TURN_GYRO]),
-                 float(v[MAG_TURN_S]), float(v[MAG_TURN_M]))
-    return ChairState(_time_ns(v), v[MEAN:MEAN + N].copy(), v[COV:COV + N * N].reshape(N, N).copy(),
-                      float(v[YAW_RATE]), float(v[LEFT_BIAS]), float(v[RIGHT_BIAS]), float(v[STILL_S]),
-                      float(v[ACCEL_MEAN]), tuple(float(g) for g in v[GRAVITY:GRAVITY + 3]), Flag(int(v[FLAGS])),
-                      bool(v[IN_IMPACT]), float(v[TRAVEL]), float(v[TURN_XY]), float(v[TURN_XX]), float(v[AXIS_XY]),
-                      float(v[AXIS_XX]), mag,
-                      AxleScale(*(float(x) for x in v[AXLE_WINDOW_SEAT:AXLE_DONE]), bool(v[AXLE_DONE])))
-
-
-def pack_samples(samples: list[ChairSample]) -> tuple[np.ndarray, np.ndarray]:
-    """(times int64 (n,), values float64 (n, SAMPLE_WIDTH)); a missing magnetometer is NaN, has_mag 0."""
-    times = np.fromiter((s.time_ns for s in samples), dtype=np.int64, count=len(samples))
-    nan3 = (math.nan, math.nan, math.nan)
-    values = np.array([(s.yaw_rate_dps, s.left_rotation_deg, s.right_rotation_deg, *s.accel_g,
-                        *(nan3 if s.mag_gauss is None else s.mag_gauss), 0.0 if s.mag_gauss is None else 1.0,
-                        s.wheel_yaw_deg)
-                       for s in samples], dtype=float).reshape(len(samples), SAMPLE_WIDTH)
-    return times, values
+                                  M_WEIGHT, MAG_STATS, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState)
+# The loop reads the layout's hundred indices as globals (numba freezes them as constants): all of them.
+from edge.chair.layout import *  # noqa: F403
+from edge.chair.merge_kernel import merge_batch
 
 
 def step_batch(settings: ChairSettings, state: ChairState, samples: list[ChairSample]) -> tuple[ChairState, np.ndarray]:
@@ -219,15 +46,6 @@ def step_batch(settings: ChairSettings, state: ChairState, samples: list[ChairSa
     times, values = pack_samples(samples)
     vector, flags = run_batch(pack_settings(settings), pack_state(state), times, values)
     return unpack_state(vector), flags
-
-
-def state_time_ns(vector: np.ndarray) -> int:
-    """The time of a packed state."""
-    return _time_ns(vector)
-
-
-def _time_ns(vector: np.ndarray) -> int:
-    return (int(vector[TIME_HIGH]) << 32) + int(vector[TIME_LOW])
 
 
 # --- compiled part -------------------------------------------------------------------------
@@ -259,7 +77,7 @@ def _pow2(typingctx, x):
 # Helpers run in the per-sample path are inlined (numba IR): a call passing numba arrays costs
 # more than the arithmetic of the small ones, ~40 % of the loop's time in all.
 
-@njit(cache=True)
+@njit
 def run_batch(settings: np.ndarray, state: np.ndarray, times: np.ndarray,
               values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Step a packed state through every sample: (new packed state, each sample's flags).
@@ -289,7 +107,65 @@ def run_batch(settings: np.ndarray, state: np.ndarray, times: np.ndarray,
     return out, flags
 
 
-@njit(cache=True, inline='always')
+@njit
+def run_poses(settings: np.ndarray, state: np.ndarray, times: np.ndarray, values: np.ndarray, next_pose_ns: int,
+              period_ns: int) -> tuple[np.ndarray, int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`run_batch` up to each pose time of a fixed schedule and to the last sample, as ChairEdge
+    publishes them: (state, the flags of every sample OR-ed, the next pose time, the poses' times
+    and rows (x, y, heading, their 3 x 3 covariance row-major: POSE_WIDTH), the impacts' times and
+    rows (accel, then gravity at the end of their run: IMPACT_WIDTH)). A pose is due at a sample
+    at or after `next_pose_ns`; the next then at +period, or half a period before the sample that
+    came late (a fixed schedule: timestamp jitter costs no pose). One call per batch instead of
+    one per pose; the runs are the same, so the same bits (run_batch splits anywhere)."""
+    n = times.shape[0]
+    pose_times = np.empty(n, dtype=np.int64)
+    poses = np.empty((n, POSE_WIDTH))
+    impact_times = np.empty(n, dtype=np.int64)
+    impacts = np.empty((n, IMPACT_WIDTH))
+    vector = state
+    flags_seen = 0
+    begin = posed = hit = 0
+    for i in range(n):
+        time_ns = times[i]
+        if time_ns < next_pose_ns and i < n - 1:
+            continue
+        vector, flags = run_batch(settings, vector, times[begin:i + 1], values[begin:i + 1])
+        for j in range(flags.shape[0]):
+            flags_seen |= flags[j]
+            if flags[j] & IMPACT:
+                impact_times[hit] = times[begin + j]
+                for k in range(3):
+                    impacts[hit, k] = values[begin + j, V_ACCEL + k]
+                    impacts[hit, 3 + k] = vector[GRAVITY + k]
+                hit += 1
+        begin = i + 1
+        if time_ns >= next_pose_ns:
+            next_pose_ns = max(next_pose_ns + period_ns, time_ns - period_ns // 2)
+            pose_times[posed] = time_ns
+            for k in range(3):
+                poses[posed, k] = vector[MEAN + k]
+                for m in range(3):
+                    poses[posed, 3 + 3 * k + m] = vector[COV + N * k + m]
+            posed += 1
+    return (vector, flags_seen, next_pose_ns, pose_times[:posed].copy(), poses[:posed].copy(),
+            impact_times[:hit].copy(), impacts[:hit].copy())
+
+
+@njit
+def merge_and_run(config: np.ndarray, ints: np.ndarray, floats: np.ndarray, role: int, time_ns: int,
+                  offsets: np.ndarray, accel: np.ndarray, gyro: np.ndarray, mag: np.ndarray, flush: int,
+                  settings: np.ndarray, state: np.ndarray, next_pose_ns: int,
+                  period_ns: int) -> tuple[int, np.ndarray, int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A chair edge's step per batch once its filter has started: edge/chair/merge_kernel.py's
+    `merge_batch`, then `run_poses` over what it released, in one call (each call from Python
+    costs microseconds): (samples merged, then run_poses' results)."""
+    times, values = merge_batch(config, ints, floats, role, time_ns, offsets, accel, gyro, mag, flush)
+    vector, flags, next_pose_ns, pose_times, poses, impact_times, impacts = run_poses(settings, state, times, values,
+                                                                                      next_pose_ns, period_ns)
+    return times.shape[0], vector, flags, next_pose_ns, pose_times, poses, impact_times, impacts
+
+
+@njit(inline='always')
 def _step(s, st, mean, cov, fit, work, dt, sample):
     """edge/chair/estimator.py's `step` for dt > 0, in place on the packed state; returns the flags."""
     yaw_rate = sample[V_YAW_RATE]
@@ -387,7 +263,7 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
     return flags
 
 
-@njit(cache=True, inline='always')
+@njit(inline='always')
 def _propagate_covariance(s, cov, work, c, sn, travel, base_travel, d_turn_d_bias, d_turn_d_scale, turn_var,
                           shove_var, dt):
     """P <- F P F^T + Q in place, touching only what F's sparsity changes.
@@ -435,7 +311,7 @@ def _propagate_covariance(s, cov, work, c, sn, travel, base_travel, d_turn_d_bia
     cov[SCALE, SCALE] += s[S_SCALE_WALK_VAR] * dt
 
 
-@njit(cache=True, inline='always')
+@njit(inline='always')
 def _scalar_update(mean, cov, work, index, innovation, noise_var):
     """The reference's `_scalar_update` for h = e_index: P's column is the gain, its row h P."""
     variance = cov[index, index] + noise_var
@@ -449,7 +325,7 @@ def _scalar_update(mean, cov, work, index, innovation, noise_var):
             cov[i, j] -= gain[i] * row[j]
 
 
-@njit(cache=True, inline='always')
+@njit(inline='always')
 def _axle_scale(s, st, mean, cov, work, seat_turn, axle_turn_deg, dt):
     """The reference's `_axle_scale` (not yet done): the seat gyro's scale, once, against the axle IMUs."""
     if not (math.isfinite(seat_turn) and math.isfinite(axle_turn_deg)):
@@ -481,7 +357,7 @@ def _axle_scale(s, st, mean, cov, work, seat_turn, axle_turn_deg, dt):
     return AXLE_SCALE_USED
 
 
-@njit(cache=True, inline='always')
+@njit(inline='always')
 def _magnetometer(s, st, mean, cov, fit, work, sample):
     """A due reading: extend the hard-iron fit and the hall's statistics, measure the gyro by the
     field's turn, then learn north or correct the heading (the reference's `_magnetometer`)."""
@@ -542,7 +418,7 @@ def _magnetometer(s, st, mean, cov, fit, work, sample):
     return flags | MAG_USED
 
 
-@njit(cache=True, inline='always')
+@njit(inline='always')
 def _reset_turn(st, angle):
     st[MAG_ANCHOR] = angle
     st[MAG_TURN_GYRO] = 0.0
@@ -550,7 +426,7 @@ def _reset_turn(st, angle):
     st[MAG_TURN_M] = 0.0
 
 
-@njit(cache=True)
+@njit
 def _turn_update(s, st, mean, cov, work, angle, variance, correlation_m, spread_xx, spread_xy, spread_yy):
     """The reference's `_turn_update`: the gyro's bias and scale from the field's turn since the anchor."""
     anchor, turn_gyro, turn_s = st[MAG_ANCHOR], st[MAG_TURN_GYRO], st[MAG_TURN_S]
@@ -577,7 +453,7 @@ def _turn_update(s, st, mean, cov, work, angle, variance, correlation_m, spread_
     return MAG_USED
 
 
-@njit(cache=True)
+@njit
 def _centre_spread(fit, radius, variance):
     """The reference's `_centre_spread`."""
     w = fit[2, 2]
@@ -587,12 +463,12 @@ def _centre_spread(fit, radius, variance):
     return scale * syy, -scale * sxy, scale * sxx
 
 
-@njit(cache=True, inline='always')
+@njit(inline='always')
 def _across(xx, xy, yy, nx, ny):
     return xx * nx * nx + 2.0 * xy * nx * ny + yy * ny * ny
 
 
-@njit(cache=True)
+@njit
 def _learn_disturbance(s, stats, radius, step_m):
     """The reference's `_learn_disturbance`, in place."""
     forget = s[S_MAG_FORGET]
@@ -607,7 +483,7 @@ def _learn_disturbance(s, stats, radius, step_m):
     stats[M_LAST] = residual
 
 
-@njit(cache=True)
+@njit
 def _mag_disturbance(s, stats):
     """The reference's `mag_disturbance`: (heading variance, correlation length)."""
     prior_weight, weight = s[S_MAG_LEVEL_WEIGHT], stats[M_WEIGHT]
@@ -629,17 +505,17 @@ def _mag_disturbance(s, stats):
     return variance, correlation
 
 
-@njit(cache=True, inline='always')
+@njit(inline='always')
 def _sum3(a, b, c):
     return 0.0 + a + b + c  # as Python's sum() (3.11): from 0, in order
 
 
-@njit(cache=True)
+@njit
 def _wrap(angle):
     return (angle + math.pi) % (2.0 * math.pi) - math.pi  # numba's float % follows Python's sign rule
 
 
-@njit(cache=True, inline='always')
+@njit(inline='always')
 def _blend_gravity(st, sample, weight):
     """The reference's `_blend_unit` of the stored gravity towards this sample's accel, in place."""
     b0 = st[GRAVITY] + weight * (sample[V_ACCEL] - st[GRAVITY])
@@ -651,7 +527,7 @@ def _blend_gravity(st, sample, weight):
     st[GRAVITY], st[GRAVITY + 1], st[GRAVITY + 2] = b0 / norm, b1 / norm, b2 / norm
 
 
-@njit(cache=True)
+@njit
 def _level(sample, st):
     """The field's horizontal part in chair (forward, left) axes, using the still-measured gravity."""
     f0, f1, f2 = sample[V_MAG], sample[V_MAG + 1], sample[V_MAG + 2]
@@ -668,7 +544,7 @@ def _level(sample, st):
     return _sum3(h0 * w0, h1 * w1, h2 * w2), _sum3(h0 * l0, h1 * l1, h2 * l2)
 
 
-@njit(cache=True)
+@njit
 def _fit_add(fit, x, y, forget):
     vector = (x, y, 1.0, _pow2(x) + _pow2(y))
     for i in range(4):
@@ -676,7 +552,7 @@ def _fit_add(fit, x, y, forget):
             fit[i, j] = forget * fit[i, j] + vector[i] * vector[j]
 
 
-@njit(cache=True)
+@njit
 def _fit_centre(fit, lu, min_spread_sq, min_points):
     """(found, centre x, centre y) of the circle x^2 + y^2 = a x + b y + c fitted to the moments.
 
@@ -701,7 +577,7 @@ def _fit_centre(fit, lu, min_spread_sq, min_points):
     return True, centre_x, centre_y
 
 
-@njit(cache=True)
+@njit
 def _solve3(fit, lu):
     """fit[:3, :3] z = fit[:3, 3] as OpenBLAS's dgesv does it (numpy's solve); not solved if singular.
 
@@ -748,7 +624,7 @@ def _solve3(fit, lu):
     return True, lu[0, 3], lu[1, 3], lu[2, 3]
 
 
-@njit(cache=True)
+@njit
 def _smallest_eigenvalue(d1, e, d2):
     """Smaller eigenvalue of [[d1, e], [e, d2]] as numpy's eigvalsh gets it (LAPACK dsterf, dlae2)."""
     if abs(e) <= math.sqrt(abs(d1)) * math.sqrt(abs(d2)) * LAPACK_EPS:

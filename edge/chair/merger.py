@@ -49,15 +49,15 @@ SEAT_STEP_MAX_NS = 7_500_000  # consecutive seat samples (200 Hz) for the clocks
 NAN3 = (math.nan, math.nan, math.nan)
 
 
-def _axis(axis: str) -> tuple[int, float]:
+def sensor_axis(axis: str) -> tuple[int, float]:
     return _INDEX[axis[1]], (-1.0 if axis[0] == "-" else 1.0)
 
 
-def _up_axis(forward: str, left: str) -> tuple[int, float]:
+def up_axis(forward: str, left: str) -> tuple[int, float]:
     """The sensor axis (index, sign) along forward x left, for axis-aligned mountings."""
     f, l = [0.0] * 3, [0.0] * 3
-    fi, fs = _axis(forward)
-    li, ls = _axis(left)
+    fi, fs = sensor_axis(forward)
+    li, ls = sensor_axis(left)
     f[fi], l[li] = fs, ls
     up = (f[1] * l[2] - f[2] * l[1], f[2] * l[0] - f[0] * l[2], f[0] * l[1] - f[1] * l[0])
     index = max(range(3), key=lambda i: abs(up[i]))
@@ -121,7 +121,7 @@ def plane_yaw_dps(gyro: tuple, accel: tuple, plane: tuple[int, int]) -> float:
     the spin leaking in through a misaligned mounting add to the size; a fit of them on the spin was
     tried and made turns worse (the yaw part does not average out over the wheel's angle in pivots)."""
     a, b = plane  # the two sensor axes across the spin axis
-    size = math.hypot(gyro[a], gyro[b])
+    size = math.sqrt(gyro[a] * gyro[a] + gyro[b] * gyro[b])  # not hypot: the compiled merger's libm rounds it otherwise
     return size if gyro[a] * accel[a] + gyro[b] * accel[b] >= 0.0 else -size
 
 
@@ -145,9 +145,10 @@ class ChairMerger:
             raise ValueError(f"agent {agent.id}: needs seat, left_wheel and right_wheel sensors")
         self.seat_id = seat.id
         self.wheel_ids = {left.id: "left", right.id: "right"}
-        self.spin = {left.id: _axis(left.spin_axis), right.id: _axis(right.spin_axis)}
+        self.spin = {left.id: sensor_axis(left.spin_axis), right.id: sensor_axis(right.spin_axis)}
         self.plane = {sensor: tuple(k for k in range(3) if k != index) for sensor, (index, _) in self.spin.items()}
-        self.seat_axes = (_axis(seat.forward_axis), _axis(seat.left_axis), _up_axis(seat.forward_axis, seat.left_axis))
+        self.seat_axes = (sensor_axis(seat.forward_axis), sensor_axis(seat.left_axis),
+                          up_axis(seat.forward_axis, seat.left_axis))
         self.wheels = {"left": WheelIntegrator(), "right": WheelIntegrator()}
         self.clocks = {"left": WheelClock(), "right": WheelClock()}  # each wheel's clock minus the seat's
         self.last_offsets = {"left": 0, "right": 0}

@@ -24,8 +24,10 @@ LOWER = "lower"
 FIGURES: tuple[tuple[str, str, str], ...] = (
     ("edge_samples_per_s", HIGHER, "edge kernel, samples/s"),
     ("details.edge.chair_edge.chair_samples_per_s", HIGHER, "whole ChairEdge.push, chair samples/s"),
+    ("details.edge.chair_edge.raw_samples_per_s", HIGHER, "whole ChairEdge.push, raw samples/s"),
     ("details.edge.merger.us_per_chair_sample", LOWER, "merger, us per chair sample"),
-    ("details.edge.startup_cpu_s.imports_s", LOWER, "edge imports, CPU s"),
+    ("details.edge.startup.imports_s", LOWER, "edge imports, CPU s"),
+    ("details.edge.startup.first_pose_wall_s", LOWER, "edge start-up to first pose, wall s"),
     ("pipeline_realtime_factor", HIGHER, "pipeline, x real time"),
     ("details.pipeline.cpu_s.hub", LOWER, "pipeline, hub CPU s"),
     ("details.pipeline.cpu_s.edges_total", LOWER, "pipeline, edges' CPU s"),

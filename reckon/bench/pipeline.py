@@ -62,8 +62,8 @@ def run_bench(out: Path, players: int = 10, duration_s: float = 60.0, seed: int 
     progress("bench: edge estimator (kernel and ChairEdge, one core)")
     edge = edge_throughput(game)
     progress(f"bench: pipeline, {players} edges + hub over Zenoh, unpaced")
-    startup_cpu_s = edge["startup_cpu_s"]["imports_s"] + edge["startup_cpu_s"]["first_call_s"]
-    pipeline = pipeline_run(game, out / "pipeline", duration_s, edge["startup_cpu_s"]["first_call_s"], startup_cpu_s)
+    startup_cpu_s = edge["startup"]["first_pose_cpu_s"]
+    pipeline = pipeline_run(game, out / "pipeline", duration_s, startup_cpu_s)
     latency_game = out / "latency-game.mcap"
     latency_duration = min(latency_s, duration_s)
     latency_players = latency_players or players
@@ -78,7 +78,7 @@ def run_bench(out: Path, players: int = 10, duration_s: float = 60.0, seed: int 
     hub_cost["zenoh_and_rest_per_input"] = hub_cost["cpu_per_input_in_run"] - hub_cost["python_per_input"]
     per_game_s = 1e3 / duration_s
     edge_parts = dict(edge["process_ms_per_game_s"],
-                      first_kernel_call=edge["startup_cpu_s"]["first_call_s"] * per_game_s)
+                      edge_ready=edge["startup"]["edge_ready_s"] * per_game_s)
     edge_in_run = pipeline["cpu_s"]["edges_total"] / players * per_game_s
     edge_cost = {"cpu_in_run": edge_in_run, **edge_parts, "zenoh_and_rest": edge_in_run - sum(edge_parts.values())}
     machine["load_average_at_end"] = list(os.getloadavg())
@@ -94,11 +94,9 @@ def run_bench(out: Path, players: int = 10, duration_s: float = 60.0, seed: int 
     }
 
 
-def pipeline_run(game: Path, folder: Path, game_s: float, first_call_cpu_s: float = 0.0,
-                 startup_cpu_s: float = 0.0) -> dict[str, Any]:
+def pipeline_run(game: Path, folder: Path, game_s: float, startup_cpu_s: float = 0.0) -> dict[str, Any]:
     """The unpaced run. Its CPU time from `--start-at` on also gives the best factor this work
-    allows on this machine's cores (all of them busy throughout), and the same without each
-    edge's first kernel call (`first_call_cpu_s`: numba loading its cache, on the first sample).
+    allows on this machine's cores (all of them busy throughout); each edge loads its kernel before.
     `startup_cpu_s`: what one edge process spends starting (play's start allowance)."""
     run = play(game, folder, UNPACED_SPEED, startup_cpu_s=startup_cpu_s)
     timeline = hub_timeline(run.recording)
@@ -118,7 +116,6 @@ def pipeline_run(game: Path, folder: Path, game_s: float, first_call_cpu_s: floa
                   "startup_before_start_at": sum(run.cpu_at_start.values()), "bench_process": run.own_cpu_s,
                   "other_processes": run.system_busy_s - hub_cpu - sum(edge_cpu) - run.own_cpu_s},
         "cpu_bound_factor": game_s * cores / (hub_cpu + sum(edge_cpu)),
-        "cpu_bound_factor_warm": game_s * cores / (hub_cpu + sum(edge_cpu) - len(edge_cpu) * first_call_cpu_s),
         "rss_mb": {"hub": run.hub.max_rss_mb, "edge_max": max(edge_rss), "edge_mean": sum(edge_rss) / len(edge_rss)},
         "hub_summary": run.hub_summary,
     }

@@ -29,6 +29,7 @@ from protocol import messages
 from protocol.session import AgentKind, Session
 from protocol.session_log import LogMessages
 from reckon.evaluation.inputs import AgentInputs
+from reckon.kernels import chair_kernels
 
 RECKON_CORRECTIONS = ("beacon", "collision")
 INPUT_TYPES = ("ImuBatch", "BeaconSighting", "CameraFrame")
@@ -59,7 +60,8 @@ def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubS
 
     `identities`, if given, receives the hub's TrackIdentity messages in order."""
     hub = VenueHub(session, settings, clock=time.perf_counter)  # times the identity engine's hops
-    edges = {agent.id: ChairEdge(agent, settings.pose_rate_hz) for agent in session.agents
+    kernels = chair_kernels()[0]
+    edges = {agent.id: ChairEdge(agent, settings.pose_rate_hz, kernels=kernels) for agent in session.agents
              if agent.kind is AgentKind.WHEELCHAIR}
     tracks: dict[int, dict[str, list]] = {messages.Track.LIVE: {}, messages.Track.REFINED: {}}
 

@@ -21,11 +21,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from edge.base import Edge, EdgeSummary
-from edge.chair.edge import ChairEdge
-from edge.pedestrian.edge import PedestrianEdge
 from edge.sources.mcap import mcap_source
 from edge.sources.registry import open_sources
-from edge.swim.edge import SwimEdge
 from protocol import bus as wire
 from protocol import keys, messages
 from protocol.session import Agent, AgentKind, Session
@@ -42,12 +39,28 @@ FLUSH_TIMEOUT_S = 10.0
 STATUS_PERIOD_S = 1.0  # DeviceStatus per sensor about this often (and at once when its flags change)
 STATUS_WARN_EVERY_S = 10.0  # a sensor's new faults are logged at most this often
 
-# Each agent kind's edge computation: (agent, session, pose_rate_hz) -> Edge
+
+# Each agent kind's edge computation: (agent, session, pose_rate_hz) -> Edge. Each imports its own
+# kind only: an edge process runs one agent, and a chair's needs neither scipy (swimmers) nor
+# imufusion (phones); a chair's merger and filter come ahead-of-time compiled, without numba (reckon/kernels.py).
+def _chair(agent: Agent, session: Session, pose_rate_hz: float) -> Edge:
+    from edge.chair.edge import ChairEdge
+    from reckon.kernels import chair_kernels
+    return ChairEdge(agent, pose_rate_hz, kernels=chair_kernels()[0])
+
+
+def _swimmer(agent: Agent, session: Session, pose_rate_hz: float) -> Edge:
+    from edge.swim.edge import SwimEdge
+    return SwimEdge(agent, session.venue.court_length_m)
+
+
+def _pedestrian(agent: Agent, session: Session, pose_rate_hz: float) -> Edge:
+    from edge.pedestrian.edge import PedestrianEdge
+    return PedestrianEdge(agent, session.venue)
+
+
 EDGES: dict[AgentKind, Callable[[Agent, Session, float], Edge]] = {
-    AgentKind.WHEELCHAIR: lambda agent, session, pose_rate_hz: ChairEdge(agent, pose_rate_hz),
-    AgentKind.SWIMMER: lambda agent, session, pose_rate_hz: SwimEdge(agent, session.venue.court_length_m),
-    AgentKind.PEDESTRIAN: lambda agent, session, pose_rate_hz: PedestrianEdge(agent, session.venue),
-}
+    AgentKind.WHEELCHAIR: _chair, AgentKind.SWIMMER: _swimmer, AgentKind.PEDESTRIAN: _pedestrian}
 
 
 def run_edge(config: BusConfig, session: Session, agent_id: str, source: Iterable[Any], stop: threading.Event,

@@ -13,10 +13,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from edge.chair.estimator import ChairSample, ChairSettings, ChairState, Flag, start, step
-from edge.chair.kernel import (FLAGS, SAMPLE_WIDTH, STATE_SIZE, V_ACCEL, V_HAS_MAG, V_LEFT, V_MAG, V_RIGHT,
-                               V_WHEEL_YAW, V_YAW_RATE, pack_samples, pack_settings, pack_state, run_batch, step_batch,
-                               unpack_state)
+from edge.chair.estimator import ChairSample, ChairSettings, ChairState, Flag, N, start, step
+from edge.chair.kernel import (COV, FLAGS, GRAVITY, MEAN, SAMPLE_WIDTH, STATE_SIZE, V_ACCEL, V_HAS_MAG, V_LEFT, V_MAG,
+                               V_RIGHT, V_WHEEL_YAW, V_YAW_RATE, pack_samples, pack_settings, pack_state, run_batch,
+                               run_poses, step_batch, unpack_state)
 from protocol.session_log import read_session
 from reckon.evaluation.inputs import build_inputs
 from reckon.evaluation.reckon_run import merged_samples
@@ -145,6 +145,44 @@ def test_any_split_into_batches_gives_the_same_result(chairs, cuts):
         flags.append(part)
     np.testing.assert_array_equal(state, whole)
     np.testing.assert_array_equal(np.concatenate(flags), whole_flags)
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.lists(st.integers(0, 6000), max_size=5), st.sampled_from([10_000_000, 20_000_000, 100_000_000]))
+def test_run_poses_is_run_batch_cut_at_each_pose(chairs, cuts, period_ns):
+    """run_poses per batch against run_batch run up to each pose time and each batch's end, as a
+    Python loop would: the same states, poses, impacts (with gravity at the end of their run) and
+    schedule, however the samples come in batches."""
+    chair, first, samples = chairs[0]
+    times, values = pack_samples(with_mishaps(samples))
+    settings_vector = pack_settings(chair)
+    bounds = [0, *sorted(min(c, len(times)) for c in cuts), len(times)]
+    expected_state, expected_next, expected_poses, expected_impacts = pack_state(first), 0, [], []
+    state, next_pose_ns, poses, impacts, seen = pack_state(first), 0, [], [], 0
+    for lo, hi in zip(bounds, bounds[1:]):
+        begin = lo
+        for i in range(lo, hi):  # the loop run_poses stands for
+            if times[i] < expected_next and i < hi - 1:
+                continue
+            expected_state, flags = run_batch(settings_vector, expected_state, times[begin:i + 1], values[begin:i + 1])
+            expected_impacts += [(times[begin + j], *values[begin + j, V_ACCEL:V_ACCEL + 3],
+                                  *expected_state[GRAVITY:GRAVITY + 3]) for j in np.flatnonzero(flags & Flag.IMPACT)]
+            begin = i + 1
+            if times[i] >= expected_next:
+                expected_next = max(expected_next + period_ns, int(times[i]) - period_ns // 2)
+                expected_poses.append((times[i], *expected_state[MEAN:MEAN + 3],
+                                       *expected_state[COV:COV + N * N].reshape(N, N)[:3, :3].ravel()))
+        state, flags, next_pose_ns, pose_times, pose_rows, impact_times, impact_rows = run_poses(
+            settings_vector, state, times[lo:hi], values[lo:hi], next_pose_ns, period_ns)
+        poses += [(t, *row) for t, row in zip(pose_times, pose_rows)]
+        impacts += [(t, *row) for t, row in zip(impact_times, impact_rows)]
+        seen |= flags
+    np.testing.assert_array_equal(state, expected_state)
+    assert next_pose_ns == expected_next
+    np.testing.assert_array_equal(np.array(poses), np.array(expected_poses))
+    assert len(impacts) >= 1
+    np.testing.assert_array_equal(np.array(impacts), np.array(expected_impacts))
+    assert seen & Flag.IMPACT and seen & Flag.GAP
 
 
 def test_packing_keeps_every_field(chairs):
