@@ -36,7 +36,7 @@ import sysconfig
 import tempfile
 from pathlib import Path
 import edge.chair
-from edge.chair.layout import ChairKernels, just_in_time
+from edge.chair.layout import ChairKernels
 
 log = logging.getLogger(__name__)
 DIRECTORY = Path(edge.chair.__file__).resolve().parent
@@ -120,6 +120,7 @@ def chair_kernels(build: bool = True) -> tuple[ChairKernels, str]:
             why = f"{path} did not load: {error}"
     log.warning("chair kernels: %s; compiling them in this process instead (numba: about 150 MiB and a few "
                 "seconds more; `python -m reckon.kernels` says why they cannot be built)", why)
+    from edge.chair.kernel import just_in_time
     _loaded[key] = (just_in_time(), "just-in-time")
     return _loaded[key]
 

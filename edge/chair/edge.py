@@ -42,7 +42,9 @@ class ChairEdge:
         self.method = method
         self.period_ns = int(1e9 / pose_rate_hz)
         self.packed_settings = layout.pack_settings(self.settings)
-        kernels = kernels or layout.just_in_time()
+        if kernels is None:
+            from edge.chair.kernel import just_in_time
+            kernels = just_in_time()
         self.kernels = kernels
         self.merger = PackedMerger(agent, kernels.merge_batch)
         # a first call of each now (just in time: compiles), not on the first sample of a live stream

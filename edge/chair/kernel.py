@@ -41,6 +41,12 @@ from edge.chair.layout import *  # noqa: F403
 from edge.chair.merge_kernel import merge_batch
 
 
+def just_in_time() -> ChairKernels:
+    """This module's kernels, compiled in this process: what the tests use, and the fallback where
+    the ahead-of-time module cannot be built (reckon/kernels.py)."""
+    return ChairKernels(merge_batch, run_batch, run_poses, merge_and_run)
+
+
 def step_batch(settings: ChairSettings, state: ChairState, samples: list[ChairSample]) -> tuple[ChairState, np.ndarray]:
     """`step` over `samples` in turn: (final state, each sample's flags as int64)."""
     times, values = pack_samples(samples)

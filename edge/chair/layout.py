@@ -219,9 +219,3 @@ class ChairKernels(NamedTuple):
     run_poses: Callable[..., tuple]
     merge_and_run: Callable[..., tuple]
 
-
-def just_in_time() -> ChairKernels:
-    """The kernels compiled in this process (numba): what the tests use, and the fallback."""
-    from edge.chair.kernel import merge_and_run, run_batch, run_poses
-    from edge.chair.merge_kernel import merge_batch
-    return ChairKernels(merge_batch, run_batch, run_poses, merge_and_run)

@@ -26,6 +26,10 @@ so catch-ups are rare; the price is latency only while a wheel is silent. Sample
 counted (`out_of_order`). Pending seat samples and each wheel's recent history are bounded: a
 seat stream more than `HISTORY` wheel samples (5 s) behind the wheels gets the oldest rotation
 kept, counted in `wheel_overrun` (live streams share one clock and never drift that far apart).
+
+This is the readable reference: the edge runs its compiled twin (edge/chair/merge_kernel.py, on the
+packed state of edge/chair/merge_layout.py), which tests/edge/test_chair_merge_kernel.py holds to the
+same bits. Change the merger here first, then there.
 """
 
 from __future__ import annotations

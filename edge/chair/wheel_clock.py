@@ -12,6 +12,9 @@ w', both read at the current offset, gives g ~ a w + b w' ~ a w(t + b / a): the 
 b / a. The offset moves by that (clipped) once the evidence is strong enough to pin it, then the
 sums start over at the new offset (Gauss-Newton in constant memory; a turn reversal is what pins
 it, a straight run tells nothing and moves nothing).
+
+The edge runs the compiled twin of `add` and `_move` (edge/chair/merge_kernel.py's `_clock_add`,
+`_clock_move`); change them here first, then there.
 """
 
 from __future__ import annotations

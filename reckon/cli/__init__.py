@@ -29,7 +29,7 @@ EXTRAS = {"sim": "eval", "import": "eval", "eval": "eval", "export": "eval", "ca
 # The top-level modules of the extras' distributions: a missing one means an extra is not installed.
 OPTIONAL_MODULES = frozenset({"serial", "bleak", "numba", "llvmlite", "imufusion", "scipy", "aiohttp", "cryptography",
                               "zxingcpp", "PIL", "shapely", "segno", "matplotlib", "motmetrics", "foxglove",
-                              "pygeomag"})
+                              "pygeomag", "setuptools"})
 
 
 def build_parser() -> argparse.ArgumentParser:

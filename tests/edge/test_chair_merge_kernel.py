@@ -16,7 +16,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from edge.chair.layout import SAMPLE_WIDTH, just_in_time, pack_samples
+from edge.chair.kernel import just_in_time
+from edge.chair.layout import SAMPLE_WIDTH, pack_samples
 from edge.chair.merge_layout import FLOATS_SIZE, INTS_SIZE, PENDING, PackedMerger
 from edge.chair.merger import ChairMerger
 from protocol import keys

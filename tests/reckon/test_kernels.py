@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from edge.chair.edge import ChairEdge
-from edge.chair.layout import just_in_time
+from edge.chair.kernel import just_in_time
 from protocol import keys
 from protocol.session_log import LogMessages, read_description
 from reckon import kernels
