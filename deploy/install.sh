@@ -56,8 +56,8 @@ python3 -c 'import sys; sys.exit(sys.version_info < (3, 11))' \
 # python3-venv: the venv module; on bookworm it is a separate package
 packages="python3-venv logrotate"
 [ $ble = no ] || packages="$packages bluez"
-# an edge's chair filter is compiled ahead of time at install (reckon/kernels.py): a C compiler and Python's headers
-[ $edge = no ] || packages="$packages gcc python3-dev"
+# an edge's chair kernels are compiled ahead of time at install (reckon/kernels.py): numba.pycc checks for C and C++ compilers, and needs Python's headers
+[ $edge = no ] || packages="$packages g++ python3-dev"
 apt-get install -y --no-install-recommends $packages
 
 if ! getent passwd reckon >/dev/null; then
