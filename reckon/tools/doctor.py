@@ -10,6 +10,8 @@ do. Checks, in order:
   listen: do frames decode, at what rate), `SENSOR=ble://ADDRESS` and `RECEIVER=ble://scan` (bleak
   importable, an adapter present), `SENSOR=phone://HOST:PORT` (the port is free, the TLS
   certificate and the stand key are there), `mcap://FILE` (a readable log);
+- chair kernels: where the venue has chairs, their merger and filter are compiled ahead of time for
+  this machine (reckon/kernels.py);
 - clock: this machine's kernel clock is synchronised (adjtimex);
 - bus: a Zenoh session opens with the given options, a hub of the venue answers, and in a short
   window: the offset of the hub's and the edges' clocks from this one (Zenoh timestamps of their
@@ -109,6 +111,7 @@ def run_doctor(settings: DoctorSettings) -> Report:
     report = Report()
     session = check_venue(report, settings)
     check_sources(report, settings, session)
+    check_chair_kernels(report, session)
     check_clock_sync(report)
     if settings.bus is None:
         return report
@@ -235,6 +238,22 @@ def clock_sync() -> tuple[bool, float] | None:
     if state < 0:
         return None
     return state != TIME_ERROR and not timex.status & STA_UNSYNC, timex.maxerror / 1000.0
+
+
+def check_chair_kernels(report: Report, session: Session | None) -> None:
+    """Where the venue has chairs: their compiled merger and filter are built for this machine."""
+    if session is None or not any(agent.kind is AgentKind.WHEELCHAIR for agent in session.agents):
+        return
+    from reckon import kernels
+
+    path = kernels.module_path(kernels.build_key())
+    if path.exists():
+        report.add("chair kernels", Level.OK, f"compiled ahead of time for this machine: {path.name}")
+    else:
+        report.add("chair kernels", Level.WARN, f"not compiled for this machine yet ({path} is missing): a chair's "
+                   "edge builds it when it starts (about 10 s), or compiles it in its own process where it cannot "
+                   "(numba, some 150 MiB more)", "run `python -m reckon.kernels` as the user who installed reckon "
+                   "(deploy/install.sh does): it builds it, or says why it cannot")
 
 
 def check_clock_sync(report: Report) -> None:

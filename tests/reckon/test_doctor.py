@@ -77,6 +77,17 @@ def test_a_good_venue_file_passes(tmp_path):
     assert report.ok and not [c for c in report.checks if c.level is Level.FAIL]
 
 
+def test_the_chair_kernels_are_reported_built_for_this_machine_or_not(tmp_path, monkeypatch):
+    from reckon import kernels
+
+    kernels.chair_kernels()  # built, as install.sh and dev.py leave it
+    built = only(run_doctor(DoctorSettings(venue=venue_file(tmp_path))), "chair kernels")
+    assert built.level is Level.OK and kernels.module_path(kernels.build_key()).name in built.message
+    monkeypatch.setattr(kernels, "build_key", lambda: "f" * 16)  # another source or machine: none built for it
+    missing = only(run_doctor(DoctorSettings(venue=venue_file(tmp_path))), "chair kernels")
+    assert missing.level is Level.WARN and "python -m reckon.kernels" in missing.fix
+
+
 def test_a_bad_venue_file_fails_naming_the_key_and_exits_1(tmp_path, capsys):
     path = venue_file(tmp_path, rate_hz=0)
     report = run_doctor(DoctorSettings(venue=path))
