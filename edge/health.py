@@ -32,6 +32,9 @@ Faults, how each is found, and what "handled" means here (docs/device-faults.md)
 - saturation: an accel or gyro axis within `SATURATION_FRACTION` of the device's full scale
   (`ranges`: per sensor, from its decoder's `DEVICE.full_scale`, edge/decoders/devices.py, which
   the source passes on; None: unknown, not checked). Counted per sample in `saturated`, flagged.
+- malformed batch: its accel or gyro values are not 3 per sample, or its magnetometer values neither
+  none nor 3 per sample (a corrupt log or a decoder bug: no device sends that). Dropped whole,
+  after its sequence is taken (so it is not also a gap), counted in `malformed`, flagged.
 - stale: no batch for `stale_s` of the edge's clock; disconnected: the source says so.
 
 Stuck and saturated samples still reach the chair estimator: the merger has no weights, and
@@ -52,7 +55,8 @@ from protocol.errors import ConfigError
 SEEN_BATCHES = 64  # sequences remembered (a bit mask) to tell a duplicate from a late batch
 SATURATION_FRACTION = 0.999  # at or above this fraction of full scale counts as saturated
 UINT32 = 1 << 32
-FLAG_NAMES = ("disconnected", "stale", "stuck", "saturated", "clock_jump", "out_of_order", "duplicate", "gap")
+FLAG_NAMES = ("disconnected", "stale", "stuck", "saturated", "clock_jump", "out_of_order", "duplicate", "gap",
+              "malformed")
 
 @dataclass(frozen=True)
 class HealthSettings:
@@ -102,6 +106,7 @@ class SensorHealth:
     clock_jumps: int = 0
     saturated: int = 0
     stuck_samples_seen: int = 0
+    malformed: int = 0
     seen_at: dict[str, int] = field(default_factory=dict)  # flag -> edge clock it was last seen
 
 
@@ -179,7 +184,7 @@ class DeviceHealth:
             battery_pct=battery_pct, last_sample_age_s=age_s, samples=health.samples, gaps=_u32(health.gaps),
             duplicates=_u32(health.duplicates), out_of_order=_u32(health.out_of_order),
             clock_jumps=_u32(health.clock_jumps), saturated=_u32(health.saturated), reconnects=_u32(reconnects),
-            spooled=_u32(spooled), flags=flags)
+            spooled=_u32(spooled), flags=flags, malformed=_u32(health.malformed))
 
     # -- sequence order ---------------------------------------------------------------------------
 
@@ -242,6 +247,11 @@ class DeviceHealth:
     def _check(self, health: SensorHealth, batch: Any, arrival_ns: int) -> Any | None:
         count = len(batch.sample_offset_ns)
         if not count:
+            return None
+        if len(batch.accel_g) != 3 * count or len(batch.gyro_dps) != 3 * count or len(batch.mag_gauss) not in (
+                0, 3 * count):
+            health.malformed += 1
+            health.seen_at["malformed"] = arrival_ns
             return None
         first_ns = batch.timestamp_ns + health.shift_ns
         span_ns = batch.sample_offset_ns[-1]

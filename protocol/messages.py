@@ -277,6 +277,7 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("reconnects", "uint32", False),
         ("spooled", "uint32", False),  # messages waiting in the edge's disk spool for the bus
         ("flags", "string", True),
+        ("malformed", "uint32", False),  # batches dropped whole: values not 3 per sample
     ],
     "TruthContact": [
         ("schema_version", "uint32", False),

@@ -122,6 +122,9 @@ class PackedMerger:
             return self.config, self.ints, self.floats, SEAT, 0, self._no_times, self._none, self._none, self._none, \
                 int(flush)
         role, n = self.roles[batch.sensor_id], len(batch.sample_offset_ns)
+        if len(batch.accel_g) != 3 * n or len(batch.gyro_dps) != 3 * n:  # edge/health.py drops these first
+            raise ValueError(f"ImuBatch of {batch.sensor_id} (sequence {batch.sequence}): {len(batch.accel_g)} accel "
+                             f"and {len(batch.gyro_dps)} gyro values for {n} samples, not 3 each")
         offsets = np.asarray(batch.sample_offset_ns, dtype=np.int64)
         accel = np.asarray(batch.accel_g, dtype=np.float64).reshape(n, 3)
         gyro = np.asarray(batch.gyro_dps, dtype=np.float64).reshape(n, 3)

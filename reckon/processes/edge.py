@@ -188,8 +188,9 @@ class StatusReporter:
         if new and now_ns - self._warned.get(sensor_id, 0) >= STATUS_WARN_EVERY_S * 1e9:
             self._warned[sensor_id] = now_ns
             log.warning("%s: %s (so far: %d gaps, %d duplicates, %d out of order, %d clock jumps, %d saturated "
-                        "samples, %d reconnects)", sensor_id, ", ".join(flags), status.gaps, status.duplicates,
-                        status.out_of_order, status.clock_jumps, status.saturated, status.reconnects)
+                        "samples, %d malformed batches, %d reconnects)", sensor_id, ", ".join(flags), status.gaps,
+                        status.duplicates, status.out_of_order, status.clock_jumps, status.saturated,
+                        status.malformed, status.reconnects)
 
     def __enter__(self) -> "StatusReporter":
         return self

@@ -131,6 +131,14 @@ def test_another_agents_sensor_and_an_empty_batch_give_nothing():
     assert merger.counters.samples == 0
 
 
+def test_a_malformed_batch_is_refused_naming_the_sensor_and_the_counts():
+    seat, _, _ = streams(4)
+    broken = batches(seat)[0]
+    del broken.gyro_dps[-2:]
+    with pytest.raises(ValueError, match=r"ImuBatch of seat \(sequence 0\): 12 accel and 10 gyro values for 4 "):
+        PackedMerger(AGENT, MERGE).push_batch(broken)
+
+
 def test_missing_sensor_is_refused():
     from protocol.session import Agent, Mount, Sensor
     with pytest.raises(ValueError, match="needs seat, left_wheel and right_wheel"):

@@ -120,6 +120,26 @@ def test_a_batch_later_than_the_window_is_dropped_and_counted(game, batches, cle
     np.testing.assert_allclose(poses[-1, 1:3], clean[0][-1, 1:3], atol=0.05)
 
 
+def test_malformed_batches_are_dropped_counted_and_flagged_and_the_stream_goes_on(game, batches, clean):
+    stream = list(batches)
+    seat = [i for i, b in enumerate(stream) if b.sensor_id == "chair01-seat"]
+    left = [i for i, b in enumerate(stream) if b.sensor_id == "chair01-left"]
+    short_accel = copy(stream[seat[30]])
+    del short_accel.accel_g[-1]  # one value short: no longer 3 per sample
+    stray_mag = copy(stream[left[30]])
+    stray_mag.mag_gauss[:] = [0.1, 0.2]  # magnetometer values neither none nor 3 per sample
+    stream[seat[30]], stream[left[30]] = short_accel, stray_mag
+    poses, health = run(game, stream)
+    for sensor_id, index in (("chair01-seat", seat[30]), ("chair01-left", left[30])):
+        state = health.sensors[sensor_id]
+        assert state.malformed == 1 and state.gaps == clean[1].sensors[sensor_id].gaps  # not also a gap
+        assert state.samples == clean[1].sensors[sensor_id].samples - len(batches[index].sample_offset_ns)
+        status = health.status(sensor_id, batches[index].received_ns)
+        assert status.malformed == 1 and "malformed" in status.flags
+    assert len(poses) == len(clean[0])  # the lost 0.1 s is bridged; every pose still comes
+    np.testing.assert_allclose(poses[-1, 1:3], clean[0][-1, 1:3], atol=0.1)
+
+
 @pytest.mark.parametrize("jump_s", [120.0, -3600.0], ids=["forward", "back"])
 @pytest.mark.parametrize("sensor", ["chair01-seat", "chair01-left"])
 def test_a_clock_jump_is_re_anchored(game, batches, clean, jump_s, sensor):
