@@ -2,7 +2,8 @@
 
 Three processes on loopback Zenoh besides this one, which only starts them, samples /proc and
 reads their results:
-- the hub: `reckon hub --venue <500 chairs>`, as a venue runs it;
+- the hub: `reckon hub --venue <500 chairs>`, as a venue runs it (with `hubs` > 1, one per shard of
+  the courts, each with its own venue: load_spec.py);
 - a load generator (`python -m reckon.bench.load generate`): what the chairs' edges would send;
 - a watcher (`python -m reckon.bench.load watch`): every `pose/live` the hub publishes, stamped
   on arrival.
@@ -26,7 +27,7 @@ from protocol.errors import ReckonError
 from protocol.session_log import SessionWriter
 from reckon.bench.children import Child, cli_command, system_busy_s, thread_cpu_s, vm_kb
 from reckon.bench.load_report import format_load, results
-from reckon.bench.load_spec import COURT_AGENTS, LoadSpec, load_session
+from reckon.bench.load_spec import LoadSpec, load_session
 from reckon.bench.report import machine_info
 from reckon.transport.bus import free_endpoint
 
@@ -39,8 +40,9 @@ DRAIN_TIMEOUT_S = 60.0  # after the generator is done, for the hub to catch up
 
 
 def run_load(out: Path, agents: int = 500, rate_hz: float = 50.0, duration_s: float = 60.0, seed: int = 1,
-             progress: Callable[[str], None] = print, record: bool = False) -> dict[str, Any]:
-    """Run the hub under `agents` chairs' load for `duration_s`; the numbers (JSON-able).
+             progress: Callable[[str], None] = print, record: bool = False, hubs: int = 1) -> dict[str, Any]:
+    """Run the hub (or `hubs` hubs, each for its block of courts) under `agents` chairs' load for
+    `duration_s`; the numbers (JSON-able): the hubs' figures summed, each hub's in details.hubs.
 
     Keys: hub_cpu_cores, latency_ms {p50, p99, max}, rss_mb {hub, hub_peak}, dropped, skipped,
     corrections, machine, details. ReckonError when a process fails (logs in `out`/logs).
@@ -51,20 +53,25 @@ def run_load(out: Path, agents: int = 500, rate_hz: float = 50.0, duration_s: fl
     for stale in ("generator.started", "put_ns.npy", "received_ns.npy", "generator.json", "watcher.json"):
         (out / stale).unlink(missing_ok=True)
     machine = machine_info()
-    spec = LoadSpec(agents, rate_hz, duration_s, seed, int((time.time() + STARTUP_S) * 1e9), free_endpoint(),
-                    free_endpoint())
-    venue_file, spec_path = out / "venue.mcap", out / "spec.json"
-    with SessionWriter(venue_file, load_session(spec)):
-        pass
+    spec = LoadSpec(agents, rate_hz, duration_s, seed, int((time.time() + STARTUP_S * hubs) * 1e9),
+                    tuple(free_endpoint() for _ in range(hubs)), free_endpoint(), hubs)
+    spec_path = out / "spec.json"
+    names = ["hub"] if hubs == 1 else [f"hub{k + 1}" for k in range(hubs)]
+    venue_files = [out / f"{name.replace('hub', 'venue')}.mcap" for name in names]
+    for shard, venue_file in enumerate(venue_files):
+        with SessionWriter(venue_file, load_session(spec, shard if hubs > 1 else None)):
+            pass
     spec_path.write_text(json.dumps(asdict(spec)))
     warmup_s, margin_s = min(WARMUP_S, duration_s / 4), min(END_MARGIN_S, duration_s / 10)
     progress(f"bench load: {agents} chairs at {rate_hz:g} Hz for {duration_s:g} s "
-             f"({-(-agents // COURT_AGENTS)} courts), hub + generator + watcher on loopback Zenoh")
-    hub = Child("hub", cli_command("hub", "--venue", str(venue_file), "--listen", spec.hub_endpoint, "--pose-rate",
-                                   repr(rate_hz), *(["-o", str(out / "hub.mcap")] if record else [])), logs / "hub.log")
+             f"({spec.courts} courts), {hubs} hub{'s' if hubs > 1 else ''} + generator + watcher on loopback Zenoh")
+    hub_children = [Child(name, cli_command(
+        "hub", "--venue", str(venue_file), "--listen", endpoint, "--pose-rate", repr(rate_hz),
+        *(["-o", str(out / f"{name}.mcap")] if record else [])), logs / f"{name}.log")
+        for name, venue_file, endpoint in zip(names, venue_files, spec.hub_endpoints)]
     watcher = _helper("watch", spec_path, out, logs / "watcher.log")
     generator = _helper("generate", spec_path, out, logs / "generator.log")
-    children = {"hub": hub, "generator": generator, "watcher": watcher}
+    children = {**{hub.name: hub for hub in hub_children}, "generator": generator, "watcher": watcher}
     rss_mb: list[tuple[float, float]] = []  # (s since the first pose, the hub's VmRSS)
     try:
         started = out / "generator.started"
@@ -78,14 +85,14 @@ def run_load(out: Path, agents: int = 500, rate_hz: float = 50.0, duration_s: fl
         next_sample = time.time()
         while generator.poll() is None:
             now = time.time()
-            if now >= next_sample:
-                rss_mb.append((now - first_ns * 1e-9, vm_kb(hub.process.pid, "VmRSS") / 1024))
+            if now >= next_sample:  # the largest hub's
+                rss_mb.append((now - first_ns * 1e-9, max(vm_kb(hub.process.pid, "VmRSS") for hub in hub_children) / 1024))
                 next_sample += 1.0
             if not at_start and now >= window[0]:
                 at_start = _cpu_now(children, now)
             if at_start and not at_end and now >= window[1]:
                 at_end = _cpu_now(children, now)
-            _check_running({"hub": hub, "watcher": watcher}, may_finish="watcher")  # done once it saw every pose
+            _check_running({**{hub.name: hub for hub in hub_children}, "watcher": watcher}, may_finish="watcher")
             time.sleep(0.02)
         if generator.exited.returncode != 0 or not at_end:
             raise ReckonError(f"bench load: the generator exited with {generator.exited.returncode} "
@@ -93,7 +100,8 @@ def run_load(out: Path, agents: int = 500, rate_hz: float = 50.0, duration_s: fl
         progress("bench load: generator done; waiting for the watcher to see every live pose")
         deadline = time.monotonic() + DRAIN_TIMEOUT_S
         while watcher.poll() is None and time.monotonic() < deadline:
-            hub.poll()
+            for hub in hub_children:
+                hub.poll()
             time.sleep(0.05)
     finally:
         for child in children.values():
@@ -103,7 +111,7 @@ def run_load(out: Path, agents: int = 500, rate_hz: float = 50.0, duration_s: fl
     for child in children.values():
         if child.exited.returncode != 0:
             raise ReckonError(f"bench load: {child.name} exited with {child.exited.returncode}; see {child.log_path}")
-    result = results(out, spec, hub, children, at_start, at_end, rss_mb, warmup_s, margin_s)
+    result = results(out, spec, hub_children, children, at_start, at_end, rss_mb, warmup_s, margin_s)
     machine["load_average_at_end"] = list(os.getloadavg())
     result["machine"] = machine
     return result
@@ -117,8 +125,10 @@ def _check_running(children: dict[str, Child], may_finish: str = "") -> None:
 
 
 def _cpu_now(children: dict[str, Child], now: float) -> dict[str, Any]:
+    hubs = [name for name in children if name.startswith("hub")]
     return {"wall": now, "machine_busy": system_busy_s(), "bench_process": time.process_time(),
-            "hub_threads": thread_cpu_s(children["hub"].process.pid),
+            "hub_threads": {f"{name}/{thread}" if len(hubs) > 1 else thread: cpu
+                            for name in hubs for thread, cpu in thread_cpu_s(children[name].process.pid).items()},
             **{name: child.cpu_s() for name, child in children.items()}}
 
 
@@ -136,7 +146,8 @@ def main(argv: list[str]) -> int:
     args = parser.parse_args(argv)
     from reckon.bench.load_traffic import generate, watch  # only the helper processes need Zenoh's side of it
 
-    spec = LoadSpec(**json.loads(args.spec.read_text()))
+    found = json.loads(args.spec.read_text())
+    spec = LoadSpec(**{**found, "hub_endpoints": tuple(found["hub_endpoints"])})
     (generate if args.role == "generate" else watch)(spec, args.out)
     return 0
 

@@ -34,14 +34,16 @@ def hub_summary(log_path: Path) -> dict[str, int]:
     return dict(zip(names, (int(v) for v in found[-1])))
 
 
-def results(out: Path, spec: LoadSpec, hub: Child, children: dict[str, Child], at_start: dict[str, float],
-             at_end: dict[str, float], rss_mb: list[tuple[float, float]], warmup_s: float,
+def results(out: Path, spec: LoadSpec, hubs: list[Child], children: dict[str, Child], at_start: dict[str, Any],
+             at_end: dict[str, Any], rss_mb: list[tuple[float, float]], warmup_s: float,
              margin_s: float) -> dict[str, Any]:
+    """The run's numbers; with several hubs, their CPU and counters summed (each in details.hubs)."""
     from reckon.processes.hub import INPUTS
 
     generated = json.loads((out / "generator.json").read_text())
     watched = json.loads((out / "watcher.json").read_text())
-    summary = hub_summary(hub.log_path)
+    summaries = {hub.name: hub_summary(hub.log_path) for hub in hubs}
+    summary = {name: sum(each[name] for each in summaries.values()) for name in next(iter(summaries.values()))}
     put, received, hub_put = (np.load(out / f"{name}.npy") for name in ("put_ns", "received_ns", "hub_published_ns"))
     sent, seen = put > 0, received > 0
     first, last = math.ceil(warmup_s * spec.rate_hz), spec.ticks - math.ceil(margin_s * spec.rate_hz)
@@ -54,7 +56,9 @@ def results(out: Path, spec: LoadSpec, hub: Child, children: dict[str, Child], a
                     + (generated["statuses"] if subscribed_status else 0))
     lost_live = int((sent & ~seen).sum())
     wall_s = at_end["wall"] - at_start["wall"]
-    cores = {name: (at_end[name] - at_start[name]) / wall_s for name in ("hub", "generator", "watcher", "bench_process")}
+    hub_cores = {hub.name: (at_end[hub.name] - at_start[hub.name]) / wall_s for hub in hubs}
+    cores = {"hub": sum(hub_cores.values()),
+             **{name: (at_end[name] - at_start[name]) / wall_s for name in ("generator", "watcher", "bench_process")}}
     cores["other_processes"] = (at_end["machine_busy"] - at_start["machine_busy"]) / wall_s - sum(cores.values())
     steady_rss = [mb for t, mb in rss_mb if warmup_s <= t <= spec.duration_s - margin_s] or [mb for _, mb in rss_mb]
     # The inputs the hub took in the window: its live poses that reached the watcher in it, times
@@ -65,7 +69,7 @@ def results(out: Path, spec: LoadSpec, hub: Child, children: dict[str, Child], a
                for name, used in at_start["hub_threads"].items()}
     hub_cpu_s = cores["hub"] * wall_s
     return {
-        "agents": spec.agents, "rate_hz": spec.rate_hz, "duration_s": spec.duration_s,
+        "agents": spec.agents, "rate_hz": spec.rate_hz, "duration_s": spec.duration_s, "hubs": spec.hubs,
         "hub_cpu_cores": cores["hub"],
         # CPU per input: robust where the share of the cores is not (the machine is shared)
         "hub_cpu_us_per_input": hub_cpu_s / window_inputs * 1e6 if window_inputs else None,
@@ -74,7 +78,7 @@ def results(out: Path, spec: LoadSpec, hub: Child, children: dict[str, Child], a
         "kept_up": generated["max_behind_ms"] <= KEPT_UP_MS,
         "latency_ms": {key: value for key, value in percentiles(((received - put)[both] * 1e-6).tolist()).items()
                        if key != "count"},
-        "rss_mb": {"hub": steady_rss[-1], "hub_peak": hub.exited.max_rss_mb},
+        "rss_mb": {"hub": steady_rss[-1], "hub_peak": max(hub.exited.max_rss_mb for hub in hubs)},
         "dropped": max(0, hub_expected - summary["inputs"]) + lost_live,
         "skipped": summary["skipped"],
         "corrections": {"total": summary["corrections"], "pairs": summary["pairs"],
@@ -84,7 +88,8 @@ def results(out: Path, spec: LoadSpec, hub: Child, children: dict[str, Child], a
             "window_s": wall_s, "cpu_cores": cores,
             "hub_threads_cpu_cores": {name: round(v, 4) for name, v in sorted(threads.items(), key=lambda kv: -kv[1])},
             "hub_inputs_in_window": round(window_inputs),
-            "hub_cpu_us_per_input_whole_run": hub.exited.cpu_s / max(1, summary["inputs"]) * 1e6,
+            "hub_cpu_us_per_input_whole_run": sum(hub.exited.cpu_s for hub in hubs) / max(1, summary["inputs"]) * 1e6,
+            "hubs": {hub.name: {"cpu_cores": hub_cores[hub.name], **summaries[hub.name]} for hub in hubs},
             "cpu_s_whole_run": {name: child.exited.cpu_s for name, child in children.items()},
             "generated": generated, "hub_expected_inputs": hub_expected, "hub": summary, "watched": watched,
             "lost_live_poses": lost_live, "poses_in_percentiles": int(both.sum()),
@@ -111,12 +116,15 @@ def format_load(result: dict[str, Any]) -> str:
     keeping = ("the hub kept up" if result["kept_up"] else
                f"the hub did NOT keep up: its back-pressure put the generator up to {lag_s:.0f} s behind, so the CPU "
                "share is the hub's ceiling here, not the load's cost")
+    hubs = result.get("hubs", 1)
+    each = ("" if hubs == 1 else "  " + ", ".join(f"{name} {h['cpu_cores']:.2f} cores ({h['inputs']} inputs)"
+                                                  for name, h in d["hubs"].items()) + "\n")
     return "\n".join([
-        f"reckon bench load: {result['agents']} chairs at {result['rate_hz']:g} Hz, {result['duration_s']:g} s; "
-        f"{m['cpu']}, {m['cores']} cores, Python {m['python']}",
-        f"hub CPU                 {result['hub_cpu_cores']:6.2f} cores    target <= 1     "
-        f"{verdict(result['hub_cpu_cores'] <= 1.0 and result['kept_up'])}   (over {d['window_s']:.0f} s of steady state)",
-        f"  {keeping}",
+        f"reckon bench load: {result['agents']} chairs at {result['rate_hz']:g} Hz, {result['duration_s']:g} s"
+        f"{'' if hubs == 1 else f', {hubs} hubs (courts sharded)'}; {m['cpu']}, {m['cores']} cores, Python {m['python']}",
+        f"hub CPU                 {result['hub_cpu_cores']:6.2f} cores    target <= {hubs}     "
+        f"{verdict(result['hub_cpu_cores'] <= hubs and result['kept_up'])}   (over {d['window_s']:.0f} s of steady state)",
+        f"{each}  {keeping}",
         f"  {result['hub_cpu_us_per_input'] or math.nan:.1f} µs of hub CPU per input in the window "
         f"({d['hub_inputs_in_window'] / d['window_s']:,.0f} inputs/s; whole run "
         f"{d['hub_cpu_us_per_input_whole_run']:.1f} µs); threads "

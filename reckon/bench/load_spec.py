@@ -3,7 +3,9 @@
 The venue: 50 courts of 10 chairs (28 x 15 m, a FIBA court each, gaps of 4 m), one hub. Ten chairs
 per court keeps each chair's neighbours, and so its contact and beacon rates, those of a real game;
 one hub for all 500 is the hard case: one subscription, one collision-pairing watermark over
-every chair. Motion is three sinusoids per axis and chair (0.02-0.10 Hz, up to ~5 m/s), computed
+every chair. With `hubs` > 1 the courts are sharded, in blocks, into that many venues (`load-1`,
+`load-2`, ...: each its own key space and venue file), one hub each, as a hall with more chairs
+than one core can take would run. Motion is three sinusoids per axis and chair (0.02-0.10 Hz, up to ~5 m/s), computed
 for all chairs at once each tick; a contact is two chairs of a court coming within 0.9 m.
 Edges are not phase-aligned: chair i publishes in slot i % PHASES of each pose period.
 """
@@ -40,8 +42,9 @@ class LoadSpec:
     duration_s: float = 60.0
     seed: int = 1
     start_at_ns: int = 0  # wall clock of the first pose period
-    hub_endpoint: str = ""
+    hub_endpoints: tuple[str, ...] = ()  # one per hub
     watcher_endpoint: str = ""
+    hubs: int = 1
 
     def __post_init__(self) -> None:
         if not 2 <= self.agents <= MAX_AGENTS:
@@ -50,6 +53,23 @@ class LoadSpec:
             raise ReckonError(f"bench load: --rate {self.rate_hz:g} Hz must be 1-200")
         if self.duration_s < 1.0:
             raise ReckonError(f"bench load: --duration {self.duration_s:g} s must be at least 1")
+        if not 1 <= self.hubs <= self.courts:
+            raise ReckonError(f"bench load: --hubs {self.hubs} must be 1-{self.courts} (a hub takes whole courts: "
+                              f"{self.agents} chairs are {self.courts} courts of {COURT_AGENTS})")
+
+    @property
+    def courts(self) -> int:
+        return -(-self.agents // COURT_AGENTS)
+
+    def shard(self, index: int) -> int:
+        """The hub (0-based) of chair `index`: its court's block."""
+        return (index // COURT_AGENTS) * self.hubs // self.courts
+
+    def venue(self, shard: int) -> str:
+        return VENUE if self.hubs == 1 else f"{VENUE}-{shard + 1}"
+
+    def venues(self) -> list[str]:
+        return [self.venue(k) for k in range(self.hubs)]
 
     @property
     def period_ns(self) -> int:
@@ -77,17 +97,20 @@ def court_origins(agents: int) -> np.ndarray:
                      (index // COURTS_PER_ROW) * (COURT_WIDTH_M + COURT_GAP_M)], axis=1)
 
 
-def load_session(spec: LoadSpec) -> Session:
+def load_session(spec: LoadSpec, shard: int | None = None) -> Session:
+    """The venue of every chair (`shard` None), or of one hub's courts."""
     origins = court_origins(spec.agents)
-    beacons = tuple(Beacon(f"c{c:02d}-goal-{end}", float(x0 + inset), float(y0 + COURT_WIDTH_M / 2), 1.0,
-                           TX_POWER_DBM, BEACON_HEIGHT_M)
-                    for c, (x0, y0) in enumerate(origins)
-                    for end, inset in (("a", BASKET_INSET_M), ("b", COURT_LENGTH_M - BASKET_INSET_M)))
+    courts = [c for c in range(len(origins)) if shard is None or c * spec.hubs // spec.courts == shard]
+    beacons = tuple(Beacon(f"c{c:02d}-goal-{end}", float(origins[c, 0] + inset),
+                           float(origins[c, 1] + COURT_WIDTH_M / 2), 1.0, TX_POWER_DBM, BEACON_HEIGHT_M)
+                    for c in courts for end, inset in (("a", BASKET_INSET_M), ("b", COURT_LENGTH_M - BASKET_INSET_M)))
     rows = -(-len(origins) // COURTS_PER_ROW)
-    venue = Venue(VENUE, min(len(origins), COURTS_PER_ROW) * (COURT_LENGTH_M + COURT_GAP_M),
-                  rows * (COURT_WIDTH_M + COURT_GAP_M), beacons)
+    venue = Venue(VENUE if shard is None else spec.venue(shard), min(len(origins), COURTS_PER_ROW) * (
+        COURT_LENGTH_M + COURT_GAP_M), rows * (COURT_WIDTH_M + COURT_GAP_M), beacons)
     agents = []
     for i in range(spec.agents):
+        if shard is not None and spec.shard(i) != shard:
+            continue
         agent_id = spec.agent_id(i)
         agents.append(Agent(agent_id, sensors=(
             Sensor(f"{agent_id}-l", Mount.LEFT_WHEEL, spin_axis="+z"), Sensor(f"{agent_id}-r", Mount.RIGHT_WHEEL,

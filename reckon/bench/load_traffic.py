@@ -8,12 +8,16 @@ each writes what it did into OUT for the run to read.
   corrections back as an edge would (acknowledges them in `correction_sequence` and moves its
   estimate by the Kalman shift), so the hub's pending shifts stay as short as in a real game;
 - watcher: every `pose/live` the hub publishes, stamped on arrival.
+
+With several hubs (`spec.hubs`), each chair's streams go under its court's venue (`spec.shard`),
+and both processes talk to every hub.
 """
 
 from __future__ import annotations
 
 import json
 import queue
+from contextlib import ExitStack
 import signal
 import threading
 import time
@@ -48,7 +52,8 @@ def generate(spec: LoadSpec, out: Path) -> None:
     poses = [messages.new("EstimatedPose", agent_id=a, method="reckon", track=messages.Track.LIVE,
                           covariance=[POSE_VARIANCE_M2, 0, 0, 0, POSE_VARIANCE_M2, 0, 0, 0, HEADING_VARIANCE_RAD2])
              for a in ids]
-    pose_keys = [keys.pose(VENUE, a, "edge") for a in ids]
+    venues = [spec.venue(spec.shard(i)) for i in range(spec.agents)]
+    pose_keys = [keys.pose(venues[i], a, "edge") for i, a in enumerate(ids)]
     pose_encoding = wire.encoding_for("EstimatedPose")
     period_ns, phase_ns, ticks = spec.period_ns, spec.phase_ns(), spec.ticks
     put_ns = np.zeros((ticks, spec.agents), dtype=np.int64)
@@ -60,68 +65,68 @@ def generate(spec: LoadSpec, out: Path) -> None:
     taken_by_kind: dict[str, int] = {}
     corrections: queue.SimpleQueue[bytes] = queue.SimpleQueue()  # unbounded: tens a second
     slots = [np.arange(s, spec.agents, PHASES) for s in range(PHASES)]
-    config = zenoh_config(connect=[spec.hub_endpoint, spec.watcher_endpoint])
-    with open_session(config) as bus, Publisher(bus) as publisher:
-        subscription = CallbackSubscription(bus, keys.all_agents(VENUE, "correction"),
-                                            lambda item: corrections.put(item.payload))
-        try:
-            wait_for_peers(bus, [wire.alive_selector(VENUE, wire.Role.HUB),
-                                 wire.alive_selector(VENUE, wire.Role.RECORDER)], 2, 120.0)
-            started_ns = time.time_ns()
-            (out / "generator.started").write_text(str(started_ns))
-            late_s = max(0.0, (started_ns - spec.start_at_ns) * 1e-9)
-            start_ns = max(spec.start_at_ns, started_ns)
-            behind_ns = 0
-            for tick in range(ticks):
-                t_ns = spec.start_at_ns + tick * period_ns  # device time of the tick (venue clock)
-                truth, heading = motion.at(tick * period_ns * 1e-9)
-                drift += rng.normal(0.0, DRIFT_M_PER_TICK, drift.shape)
-                pairs, touching = contacts(truth, touching)
-                counts["contacts"] += len(pairs)
-                impacted = {i: t_ns for pair in pairs for i in pair}
-                while not corrections.empty():
-                    _take(messages.Correction.FromString(corrections.get()), index, offset, acknowledged, taken_by_kind)
-                estimate = truth + drift + offset
-                heard = rng.random((spec.agents, 2)) < BEACON_HEARD_HZ / spec.rate_hz
-                rssi = load_rssi(truth, beacon_xy[own_beacons], rng)
-                status_tick = tick % max(1, int(spec.rate_hz)) == 0
-                for slot, members in enumerate(slots):
-                    due_ns = start_ns + tick * period_ns + slot * (period_ns // PHASES)
-                    wait_s = (due_ns - time.time_ns()) * 1e-9
-                    if wait_s > 0:
-                        time.sleep(wait_s)
-                    else:
-                        behind_ns = max(behind_ns, -int(wait_s * 1e9))
-                    for i in members.tolist():
-                        pose = poses[i]
-                        pose.timestamp_ns = t_ns + int(phase_ns[i])
-                        pose.x_m, pose.y_m = float(estimate[i, 0]), float(estimate[i, 1])
-                        pose.heading_rad = float(heading[i])
-                        pose.correction_sequence = int(acknowledged[i])
-                        put_ns[tick, i] = time.time_ns()
-                        publisher.publish_bytes(pose_keys[i], pose.SerializeToString(), pose_encoding)
-                        if i in impacted:
-                            publisher.publish(keys.impact(VENUE, ids[i]), messages.new(
-                                "ImpactEvent", timestamp_ns=impacted[i], agent_id=ids[i], sensor_id=seat[i],
-                                peak_g=float(rng.uniform(7.0, 14.0))))
-                            counts["impacts"] += 1
-                        for end in np.flatnonzero(heard[i] & (rssi[i] >= SENSITIVITY_DBM)).tolist():
-                            publisher.publish(keys.beacon(VENUE, ids[i], seat[i]), messages.new(
-                                "BeaconSighting", timestamp_ns=pose.timestamp_ns, agent_id=ids[i], sensor_id=seat[i],
-                                beacon_id=beacon_ids[own_beacons[i, end]], rssi_dbm=float(rssi[i, end])))
-                            counts["sightings"] += 1
-                        if status_tick:
-                            publisher.publish(keys.status(VENUE, ids[i], seat[i]), messages.new(
-                                "DeviceStatus", timestamp_ns=pose.timestamp_ns, agent_id=ids[i], sensor_id=seat[i],
-                                connected=True, battery_pct=-1.0, last_sample_age_s=0.01,
-                                samples=tick * 600 // int(spec.rate_hz)))
-                            counts["statuses"] += 1
-                counts["poses"] += spec.agents
-            answered = flush(bus, wire.alive_selector(VENUE, wire.Role.HUB), 30.0)
-            if not answered:
-                raise ReckonError("bench load generator: the hub did not answer the flush barrier within 30 s")
-        finally:
-            subscription.undeclare()
+    config = zenoh_config(connect=[*spec.hub_endpoints, spec.watcher_endpoint])
+    with open_session(config) as bus, Publisher(bus) as publisher, ExitStack() as subscriptions:
+        for venue in spec.venues():
+            subscriptions.enter_context(CallbackSubscription(bus, keys.all_agents(venue, "correction"),
+                                                             lambda item: corrections.put(item.payload)))
+        # every hub, and the watcher as a recorder of each venue, up before the first pose
+        wait_for_peers(bus, [wire.alive_selector(venue, role) for venue in spec.venues()
+                             for role in (wire.Role.HUB, wire.Role.RECORDER)], 2 * spec.hubs, 120.0)
+        started_ns = time.time_ns()
+        (out / "generator.started").write_text(str(started_ns))
+        late_s = max(0.0, (started_ns - spec.start_at_ns) * 1e-9)
+        start_ns = max(spec.start_at_ns, started_ns)
+        behind_ns = 0
+        for tick in range(ticks):
+            t_ns = spec.start_at_ns + tick * period_ns  # device time of the tick (venue clock)
+            truth, heading = motion.at(tick * period_ns * 1e-9)
+            drift += rng.normal(0.0, DRIFT_M_PER_TICK, drift.shape)
+            pairs, touching = contacts(truth, touching)
+            counts["contacts"] += len(pairs)
+            impacted = {i: t_ns for pair in pairs for i in pair}
+            while not corrections.empty():
+                _take(messages.Correction.FromString(corrections.get()), index, offset, acknowledged, taken_by_kind)
+            estimate = truth + drift + offset
+            heard = rng.random((spec.agents, 2)) < BEACON_HEARD_HZ / spec.rate_hz
+            rssi = load_rssi(truth, beacon_xy[own_beacons], rng)
+            status_tick = tick % max(1, int(spec.rate_hz)) == 0
+            for slot, members in enumerate(slots):
+                due_ns = start_ns + tick * period_ns + slot * (period_ns // PHASES)
+                wait_s = (due_ns - time.time_ns()) * 1e-9
+                if wait_s > 0:
+                    time.sleep(wait_s)
+                else:
+                    behind_ns = max(behind_ns, -int(wait_s * 1e9))
+                for i in members.tolist():
+                    pose = poses[i]
+                    pose.timestamp_ns = t_ns + int(phase_ns[i])
+                    pose.x_m, pose.y_m = float(estimate[i, 0]), float(estimate[i, 1])
+                    pose.heading_rad = float(heading[i])
+                    pose.correction_sequence = int(acknowledged[i])
+                    put_ns[tick, i] = time.time_ns()
+                    publisher.publish_bytes(pose_keys[i], pose.SerializeToString(), pose_encoding)
+                    if i in impacted:
+                        publisher.publish(keys.impact(venues[i], ids[i]), messages.new(
+                            "ImpactEvent", timestamp_ns=impacted[i], agent_id=ids[i], sensor_id=seat[i],
+                            peak_g=float(rng.uniform(7.0, 14.0))))
+                        counts["impacts"] += 1
+                    for end in np.flatnonzero(heard[i] & (rssi[i] >= SENSITIVITY_DBM)).tolist():
+                        publisher.publish(keys.beacon(venues[i], ids[i], seat[i]), messages.new(
+                            "BeaconSighting", timestamp_ns=pose.timestamp_ns, agent_id=ids[i], sensor_id=seat[i],
+                            beacon_id=beacon_ids[own_beacons[i, end]], rssi_dbm=float(rssi[i, end])))
+                        counts["sightings"] += 1
+                    if status_tick:
+                        publisher.publish(keys.status(venues[i], ids[i], seat[i]), messages.new(
+                            "DeviceStatus", timestamp_ns=pose.timestamp_ns, agent_id=ids[i], sensor_id=seat[i],
+                            connected=True, battery_pct=-1.0, last_sample_age_s=0.01,
+                            samples=tick * 600 // int(spec.rate_hz)))
+                        counts["statuses"] += 1
+            counts["poses"] += spec.agents
+        for venue in spec.venues():
+            if not flush(bus, wire.alive_selector(venue, wire.Role.HUB), 30.0):
+                raise ReckonError(f"bench load generator: the hub of {venue} did not answer the flush barrier "
+                                  "within 30 s")
     counts["corrections_taken"] = sum(taken_by_kind.values())
     np.save(out / "put_ns.npy", put_ns)
     (out / "generator.json").write_text(json.dumps({
@@ -174,12 +179,16 @@ def watch(spec: LoadSpec, out: Path) -> None:
             if tally["live"] == expected:
                 stop.set()
 
-    with open_session(zenoh_config(listen=[spec.watcher_endpoint], connect=[spec.hub_endpoint])) as bus:
+    with open_session(zenoh_config(listen=[spec.watcher_endpoint], connect=list(spec.hub_endpoints))) as bus:
         # A FIFO, not a ring: a live pose missed here would count as lost; a full FIFO holds the hub back.
-        subscription = DirectSubscription.fifo(bus, keys.all_agents(VENUE, "pose/live"), FIFO_CAPACITY)
+        # Every venue's live poses: `reckon/<venue>/<agent>/pose/live` whatever the venue.
+        subscription = DirectSubscription.fifo(bus, keys.all_agents(VENUE if spec.hubs == 1 else "*", "pose/live"),
+                                               FIFO_CAPACITY)
         thread = threading.Thread(target=drain, args=(subscription,), daemon=True)
         thread.start()
-        with Alive(bus, VENUE, wire.Role.RECORDER, "bench-watcher"):
+        with ExitStack() as alive:
+            for venue in spec.venues():
+                alive.enter_context(Alive(bus, venue, wire.Role.RECORDER, "bench-watcher"))
             while not stop.wait(0.2):
                 pass
         subscription.undeclare()

@@ -13,7 +13,7 @@ def run_bench_command(args: argparse.Namespace, progress: Callable[[str], None])
         from reckon.bench.load import format_load, run_load
 
         result = run_load(Path(args.out) / "load", agents=args.agents, rate_hz=args.rate, duration_s=args.duration,
-                          seed=args.seed, progress=progress)
+                          seed=args.seed, progress=progress, hubs=args.hubs)
         print(json.dumps(result, indent=1) if args.json else format_load(result))
         return 0
     if args.suite == "soak":
@@ -48,6 +48,8 @@ def register(sub: Any) -> None:
     bench.add_argument("--duration", type=float, default=60.0,
                        help="game seconds of the unpaced run; load: seconds of load (default 60)")
     bench.add_argument("--agents", type=int, default=500, help="load: simulated chairs (default 500)")
+    bench.add_argument("--hubs", type=int, default=1,
+                       help="load: hubs, the courts sharded among them, each its own venue (default 1)")
     bench.add_argument("--rate", type=float, default=50.0, metavar="HZ", help="load: poses per chair a second (default 50)")
     bench.add_argument("--hours", type=float, default=1.0, help="soak: hours of game replayed (default 1)")
     bench.add_argument("--seed", type=int, default=1)

@@ -11,6 +11,7 @@ import pytest
 
 from hub.chair.hub import ChairHub, HubSettings
 from protocol import messages
+from protocol.errors import ReckonError
 from reckon.bench.load import run_load
 from reckon.bench.load_report import format_load
 from reckon.bench.load_spec import COURT_AGENTS, LoadSpec, contacts, load_session
@@ -40,6 +41,25 @@ def test_load_result_shape_and_nothing_dropped(load):
     assert result["hub_cpu_cores"] > 0 and result["rss_mb"]["hub_peak"] > 0 and isinstance(result["kept_up"], bool)
     json.dumps(result, allow_nan=False)
     assert "dropped 0" in format_load(result) and lines
+
+
+def test_two_hubs_share_the_courts_and_nothing_is_dropped(tmp_path):
+    result = run_load(tmp_path, agents=30, rate_hz=20.0, duration_s=2.0, progress=lambda line: None, hubs=2)
+    details = result["details"]
+    assert result["hubs"] == 2 and result["dropped"] == 0 and result["skipped"] == 0
+    assert details["watched"]["live"] == details["generated"]["poses"] == 30 * 40
+    assert details["watched"]["strays"] == 0 and details["watched"]["duplicates"] == 0
+    hubs = details["hubs"]
+    assert set(hubs) == {"hub1", "hub2"}
+    # 3 courts in blocks: the first hub takes one court's chairs' poses, the second two courts'
+    assert [hubs[name]["outputs"] >= poses for name, poses in (("hub1", 10 * 40), ("hub2", 20 * 40))] == [True, True]
+    assert sum(h["inputs"] for h in hubs.values()) == details["hub"]["inputs"] == details["hub_expected_inputs"]
+    assert "2 hubs (courts sharded)" in format_load(result)
+
+
+def test_more_hubs_than_courts_is_refused():
+    with pytest.raises(ReckonError, match="--hubs 3 must be 1-2"):
+        LoadSpec(agents=20, hubs=3)
 
 
 def test_soak_result_shape(tmp_path):
