@@ -1,6 +1,7 @@
 """A chair's compiled steps, ahead of time: built once per source and machine, loaded without numba.
 
-edge/chair/merge_kernel.py's `merge_batch` and edge/chair/kernel.py's `run_batch` are numba code.
+edge/chair/merge_kernel.py's `merge_batch` and edge/chair/kernel.py's `run_batch`, `run_poses` and
+`merge_and_run` are numba code.
 Compiling them just in time in every edge process costs that process numba and LLVM (some 150 MiB
 of its 230) and seconds of start-up, ten times over on a Pi with ten chairs. So they are compiled
 once by numba's ahead-of-time compiler (numba.pycc) into an extension module beside their sources,
@@ -8,8 +9,8 @@ once by numba's ahead-of-time compiler (numba.pycc) into an extension module bes
 eval`, the bench) loads that with numpy alone.
 
 The key hashes what the machine code depends on: the sources in SOURCES (their constants are
-frozen into it), the exported signatures, numba's version, the Python build and the CPU (it is compiled
-for the host's instruction set, as the just-in-time code is). A changed source or another machine
+frozen into it), the exported signatures, numba's version, the Python build and the CPU (it is
+compiled for the host's instruction set, as the just-in-time code is). A changed source or another machine
 finds no module of its key and builds one: in a child process (so the caller never imports numba),
 under a file lock (ten edges starting at once build it once), about 10 s. install.sh and dev.py
 build it at install time (`python -m reckon.kernels`).
@@ -35,6 +36,7 @@ import sys
 import sysconfig
 import tempfile
 from pathlib import Path
+
 import edge.chair
 from edge.chair.layout import ChairKernels
 

@@ -3,8 +3,8 @@
 ImuBatch messages of the chair's three sensors -> the merger (edge/chair/merger.py) -> the chair
 filter (edge/chair/estimator.py), both run in their compiled batch forms (edge/chair/merge_kernel.py,
 edge/chair/kernel.py), handed in as `kernels`: reckon/kernels.py loads them ahead-of-time compiled,
-without numba; by default they are compiled just in time, which the tests use. A pose leaves on a fixed schedule of the seat clock (`pose_rate_hz`),
-an ImpactEvent at once. Corrections from the hub (`correct`) are applied before the next sample,
+without numba; by default they are compiled just in time, which the tests use. A pose leaves on a
+fixed schedule of the seat clock (`pose_rate_hz`), an ImpactEvent at once. Corrections from the hub (`correct`) are applied before the next sample,
 to the state as it is then: a Correction measures where the chair was at its time, as an offset
 from the pose the hub had for that time, and the few samples since then moved the chair the same
 whatever its error. `reckon edge` wraps this in Zenoh; `reckon eval` drives it in lockstep with
@@ -48,6 +48,7 @@ class ChairEdge:
         self.kernels = kernels
         self.merger = PackedMerger(agent, kernels.merge_batch)
         # a first call of each now (just in time: compiles), not on the first sample of a live stream
+        kernels.merge_batch(*self.merger.arguments(None))
         kernels.merge_and_run(*self.merger.arguments(None), self.packed_settings, np.zeros(layout.STATE_SIZE), 0,
                               self.period_ns)
         kernels.run_poses(self.packed_settings, np.zeros(layout.STATE_SIZE), np.zeros(0, dtype=np.int64),

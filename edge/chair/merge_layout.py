@@ -1,9 +1,9 @@
 """The chair merger's packed form: edge/chair/merger.py's state in two flat arrays, for the compiled
 `merge_batch` (edge/chair/merge_kernel.py), and `PackedMerger`, which feeds it whole ImuBatch messages.
 
-Why: the Python merger costs ~15 us per chair sample, three quarters of the edge's push path; the
-compiled one does the same in well under a microsecond, so a chair's edge keeps up with >= 1 M raw
-samples/s on one core. merger.py stays the readable reference (change it first, then the kernel);
+Why: the Python merger costs ~13 us per chair sample, two thirds of the edge's push path; the
+compiled one, the messages' fields read into arrays included, 2.2 us (`reckon bench`,
+docs/benchmarks.md), which took the whole push path from 0.17 to 0.87 M raw samples/s. merger.py stays the readable reference (change it first, then the kernel);
 tests/edge/test_chair_merge_kernel.py holds the two to the same bits.
 
 State: `ints` (int64: each wheel's history of times, ring head and count, counters, its clock's
