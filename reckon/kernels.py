@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import fcntl
+import functools
 import hashlib
 import importlib.metadata
 import importlib.util
@@ -43,7 +44,8 @@ from edge.chair.layout import ChairKernels
 log = logging.getLogger(__name__)
 DIRECTORY = Path(edge.chair.__file__).resolve().parent
 # of edge/chair: what the machine code is made from, constants included
-SOURCES = ("kernel.py", "layout.py", "estimator.py", "merge_kernel.py", "merge_layout.py", "merger.py", "wheel_clock.py")
+SOURCES = ("kernel.py", "kernel_math.py", "mag_kernel.py", "layout.py", "estimator.py", "merge_kernel.py",
+           "merge_layout.py", "merger.py", "wheel_clock.py")
 PREFIX = "_chair_kernel_"
 SIGNATURES = {  # C-contiguous arrays, as the just-in-time code specialises (loops over 'A' arrays are slower)
     # merge_batch(config, ints, floats, role, time_ns, offsets, accel, gyro, mag, flush)
@@ -77,6 +79,7 @@ def cpu_identity() -> str:
     return "|".join(f"{name}={seen[name]}" for name in sorted(seen)) or platform.processor()
 
 
+@functools.cache  # the sources this process runs cannot change under it: read them once
 def build_key() -> str:
     digest = hashlib.sha256()
     for name in SOURCES:

@@ -10,9 +10,9 @@ there first, then here; tests/edge/test_chair_kernel.py holds the kernel to it.
 Same operations in the same order round the same, so the two agree bit for bit (measured on
 x86-64, Python 3.11, numpy 2.4 with its bundled OpenBLAS 0.3.31), and elsewhere in the last bits:
 - Python's `x ** 2` is libm's pow(x, 2.0), which differs from x * x in the last bit for ~0.1 %
-  of values: the kernel calls pow too (`_pow2`), never letting LLVM turn it into x * x.
+  of values: the kernel calls pow too (`pow2`), never letting LLVM turn it into x * x.
 - numpy hands the 7x7 products and the 3x3 solve to OpenBLAS, whose small-matrix kernels sum
-  each dot product in index order with fused multiply-adds: the kernel does the same (`_fma`),
+  each dot product in index order with fused multiply-adds: the kernel does the same (`fma`),
   skipping only the Jacobian's structural zeros, which add nothing there either. Another BLAS
   build or CPU may sum in another order: ~1e-14 apart after a game (the tests allow 1e-9).
 - The eigenvalue check repeats LAPACK's 2x2 formula (dlae2), as numpy's eigvalsh runs it.
@@ -23,6 +23,9 @@ once per source and machine by reckon/kernels.py), so their processes never impo
 150 MiB and seconds of start-up). Importing this module compiles just in time instead (the tests,
 and a machine without a C compiler); no on-disk cache, since numba's would key on this file alone
 and miss a change to the layout's or the estimator's constants frozen into the machine code.
+
+The magnetometer aid's part of the step is edge/chair/mag_kernel.py; the arithmetic both round as
+the reference does (fma, pow2, sum3, wrap) is edge/chair/kernel_math.py.
 """
 
 from __future__ import annotations
@@ -30,14 +33,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from llvmlite import ir
-from numba import njit, types
-from numba.extending import intrinsic
+from numba import njit
 
-from edge.chair.estimator import (BIAS, DEG, GYRO_SCALE, HEADING, M_DIFF, M_LAST, M_RADIAL, M_RADIUS, M_STEP,
-                                  M_WEIGHT, MAG_STATS, NORTH, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState)
+from edge.chair.estimator import BIAS, DEG, GYRO_SCALE, HEADING, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState
+from edge.chair.kernel_math import fma, pow2, sum3
 # The loop reads the layout's hundred indices as globals (numba freezes them as constants): all of them.
 from edge.chair.layout import *  # noqa: F403
+from edge.chair.mag_kernel import magnetometer
 from edge.chair.merge_kernel import merge_batch
 
 
@@ -55,30 +57,6 @@ def step_batch(settings: ChairSettings, state: ChairState, samples: list[ChairSa
 
 
 # --- compiled part -------------------------------------------------------------------------
-
-@intrinsic
-def _fma(typingctx, a, b, c):
-    """a * b + c rounded once, as OpenBLAS's kernels accumulate."""
-    def codegen(context, builder, signature, args):
-        return builder.fma(*args)
-    return types.float64(types.float64, types.float64, types.float64), codegen
-
-
-@intrinsic
-def _pow2(typingctx, x):
-    """libm pow(x, 2.0), which is what Python's `x ** 2` computes (not always x * x).
-
-    Declared `nobuiltin` so that LLVM keeps the call instead of rewriting it as x * x.
-    """
-    def codegen(context, builder, signature, args):
-        double = ir.DoubleType()
-        pow_fn = builder.module.globals.get("pow")
-        if pow_fn is None:
-            pow_fn = ir.Function(builder.module, ir.FunctionType(double, [double, double]), name="pow")
-        pow_fn.attributes.add("nobuiltin")
-        return builder.call(pow_fn, [args[0], ir.Constant(double, 2.0)])
-    return types.float64(types.float64), codegen
-
 
 # Helpers run in the per-sample path are inlined (numba IR): a call passing numba arrays costs
 # more than the arithmetic of the small ones, ~40 % of the loop's time in all.
@@ -178,7 +156,7 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
     seat = math.isfinite(yaw_rate)  # a bridge sample has the wheels only
     flags = GAP if dt > s[S_GAP] or not seat or not math.isfinite(st[YAW_RATE]) else 0
     if seat:
-        accel_norm = math.sqrt(_sum3(sample[V_ACCEL] * sample[V_ACCEL], sample[V_ACCEL + 1] * sample[V_ACCEL + 1],
+        accel_norm = math.sqrt(sum3(sample[V_ACCEL] * sample[V_ACCEL], sample[V_ACCEL + 1] * sample[V_ACCEL + 1],
                                      sample[V_ACCEL + 2] * sample[V_ACCEL + 2]))
     else:
         accel_norm = st[ACCEL_MEAN]
@@ -206,10 +184,10 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
     if flags & GAP:  # the seat gyro saw nothing in between: the wheels tell the turn
         if math.isfinite(wheel_yaw):
             turn = st[AXIS_XY] / st[AXIS_XX] * wheel_yaw
-            turn_var = _pow2(s[S_WHEEL_AXIS_SD] * turn) + _pow2(s[S_WHEEL_AXIS_BIAS] * dt)
+            turn_var = pow2(s[S_WHEEL_AXIS_SD] * turn) + pow2(s[S_WHEEL_AXIS_BIAS] * dt)
         else:
             turn = st[TURN_XY] / st[TURN_XX] * wheel_difference
-            turn_var = _pow2(s[S_WHEEL_TURN_SD] * turn)
+            turn_var = pow2(s[S_WHEEL_TURN_SD] * turn)
         d_turn_d_bias = d_turn_d_scale = 0.0
     else:
         turn = (1.0 + mean[GYRO_SCALE]) * gyro_rate * dt
@@ -236,9 +214,9 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
     shove_var = 0.0
     if shove:
         flags |= IMPACT
-        horizontal = (_pow2(sample[V_ACCEL] - st[GRAVITY])
-                      + _pow2(sample[V_ACCEL + 1] - st[GRAVITY + 1]))
-        vertical = _pow2(sample[V_ACCEL + 2] - st[GRAVITY + 2])
+        horizontal = (pow2(sample[V_ACCEL] - st[GRAVITY])
+                      + pow2(sample[V_ACCEL + 1] - st[GRAVITY + 1]))
+        vertical = pow2(sample[V_ACCEL + 2] - st[GRAVITY + 2])
         shove_var = s[S_SHOVE_VAR] * (horizontal / (horizontal + vertical))
     _propagate_covariance(s, cov, work, c, sn, travel, base_travel, d_turn_d_bias, d_turn_d_scale, turn_var,
                           shove_var, dt)
@@ -259,7 +237,7 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
     if sample[V_HAS_MAG] == 0.0 or due > 0.0:
         st[MAG_DUE] = due
     else:
-        flags |= _magnetometer(s, st, mean, cov, fit, work, sample)
+        flags |= magnetometer(s, st, mean, cov, fit, work, sample)
     st[YAW_RATE] = yaw_rate
     st[STILL_S] = still_s
     st[ACCEL_MEAN] = accel_mean
@@ -287,11 +265,11 @@ def _propagate_covariance(s, cov, work, c, sn, travel, base_travel, d_turn_d_bia
 
     # A = F P: its rows X, Y, HEADING into work, the other rows are P's own
     for j in range(N):
-        work[W_FP, j] = _fma(x_gyro, cov[GYRO_SCALE, j], _fma(x_scale, cov[SCALE, j], _fma(
-            x_bias, cov[BIAS, j], _fma(x_heading, cov[HEADING, j], cov[X, j]))))
-        work[W_FP + 1, j] = _fma(y_gyro, cov[GYRO_SCALE, j], _fma(y_scale, cov[SCALE, j], _fma(
-            y_bias, cov[BIAS, j], _fma(y_heading, cov[HEADING, j], cov[Y, j]))))
-        work[W_FP + 2, j] = _fma(d_turn_d_scale, cov[GYRO_SCALE, j], _fma(d_turn_d_bias, cov[BIAS, j], cov[HEADING, j]))
+        work[W_FP, j] = fma(x_gyro, cov[GYRO_SCALE, j], fma(x_scale, cov[SCALE, j], fma(
+            x_bias, cov[BIAS, j], fma(x_heading, cov[HEADING, j], cov[X, j]))))
+        work[W_FP + 1, j] = fma(y_gyro, cov[GYRO_SCALE, j], fma(y_scale, cov[SCALE, j], fma(
+            y_bias, cov[BIAS, j], fma(y_heading, cov[HEADING, j], cov[Y, j]))))
+        work[W_FP + 2, j] = fma(d_turn_d_scale, cov[GYRO_SCALE, j], fma(d_turn_d_bias, cov[BIAS, j], cov[HEADING, j]))
     for j in range(N):
         cov[X, j], cov[Y, j], cov[HEADING, j] = work[W_FP, j], work[W_FP + 1, j], work[W_FP + 2, j]
 
@@ -299,13 +277,13 @@ def _propagate_covariance(s, cov, work, c, sn, travel, base_travel, d_turn_d_bia
     for i in range(N):
         a_x, a_y, a_heading = cov[i, X], cov[i, Y], cov[i, HEADING]
         a_bias, a_scale, a_gyro = cov[i, BIAS], cov[i, SCALE], cov[i, GYRO_SCALE]
-        cov[i, X] = _fma(a_gyro, x_gyro, _fma(a_scale, x_scale, _fma(a_bias, x_bias, _fma(a_heading, x_heading, a_x))))
-        cov[i, Y] = _fma(a_gyro, y_gyro, _fma(a_scale, y_scale, _fma(a_bias, y_bias, _fma(a_heading, y_heading, a_y))))
-        cov[i, HEADING] = _fma(a_gyro, d_turn_d_scale, _fma(a_bias, d_turn_d_bias, a_heading))
+        cov[i, X] = fma(a_gyro, x_gyro, fma(a_scale, x_scale, fma(a_bias, x_bias, fma(a_heading, x_heading, a_x))))
+        cov[i, Y] = fma(a_gyro, y_gyro, fma(a_scale, y_scale, fma(a_bias, y_bias, fma(a_heading, y_heading, a_y))))
+        cov[i, HEADING] = fma(a_gyro, d_turn_d_scale, fma(a_bias, d_turn_d_bias, a_heading))
 
     # + Q: slip along and across the mid-step heading, the gyro's noise, the random walks
-    along = _pow2(s[S_ALONG_SD] * travel)
-    across = _pow2(s[S_ACROSS_SD] * travel)
+    along = pow2(s[S_ALONG_SD] * travel)
+    across = pow2(s[S_ACROSS_SD] * travel)
     along += shove_var
     across += shove_var
     cov[X, X] += along * c * c + across * sn * sn
@@ -364,296 +342,14 @@ def _axle_scale(s, st, mean, cov, work, seat_turn, axle_turn_deg, dt):
 
 
 @njit(inline='always')
-def _magnetometer(s, st, mean, cov, fit, work, sample):
-    """A due reading: extend the hard-iron fit and the hall's statistics, measure the gyro by the
-    field's turn, then learn north or correct the heading (the reference's `_magnetometer`)."""
-    forward, left = _level(sample, st)
-    _fit_add(fit, forward, left, s[S_MAG_FIT_FORGET])
-    st[MAG_DUE] = s[S_MAG_PERIOD]
-    found, centre_x, centre_y = _fit_centre(fit, work[W_LU:W_LU + 3], s[S_MAG_MIN_SPREAD_SQ], s[S_MAG_MIN_POINTS])
-    if not found:
-        return 0
-    east, north_part = forward - centre_x, left - centre_y
-    angle = math.atan2(north_part, east)  # = north - heading
-    radius = math.sqrt(east * east + north_part * north_part)
-    stats = st[MAG_STATS_AT:MAG_STATS_AT + MAG_STATS]
-    if st[MAG_SINCE_READ] >= s[S_MAG_MIN_STEP]:
-        _learn_disturbance(s, stats, radius, st[MAG_SINCE_READ])
-        st[MAG_SINCE_READ] = 0.0
-    variance, correlation_m = _mag_disturbance(s, stats)
-    spread_xx, spread_xy, spread_yy = _centre_spread(fit, radius, variance)
-    flags = 0
-    if not math.isfinite(st[MAG_ANCHOR]) or not math.isfinite(st[MAG_TURN_GYRO]):
-        _reset_turn(st, angle)
-    elif st[MAG_TURN_S] >= s[S_MAG_TURN_S]:
-        flags = _turn_update(s, st, mean, cov, work, angle, variance, correlation_m, spread_xx, spread_xy, spread_yy)
-        _reset_turn(st, angle)
-    if st[MAG_READY] == 0.0 or st[MAG_REJECTIONS] >= s[S_MAG_RECOVER_REJECTIONS]:
-        # (re)learn north = angle + heading: it inherits the heading's error and all its correlations
-        mean[NORTH] = angle + mean[HEADING]
-        for j in range(N):
-            cov[NORTH, j] = cov[HEADING, j]
-        for i in range(N):
-            cov[i, NORTH] = cov[i, HEADING]
-        cov[NORTH, NORTH] = cov[HEADING, HEADING] + variance
-        st[MAG_READY] = 1.0
-        st[MAG_REJECTIONS] = 0.0
-        st[MAG_SINCE_UPDATE] = 0.0
-        return flags
-    if st[MAG_SINCE_UPDATE] < correlation_m:  # the same stretch of disturbed field
-        return flags
-    innovation = _wrap(angle - (mean[NORTH] - mean[HEADING]))
-    # h = e_NORTH - e_HEADING: every product with h is one exact subtraction, as in numpy
-    gain, row = work[W_GAIN], work[W_ROW]
-    for j in range(N):
-        row[j] = cov[NORTH, j] - cov[HEADING, j]  # h P
-    total = ((row[NORTH] - row[HEADING]) + variance
-             + _across(spread_xx, spread_xy, spread_yy, -math.sin(angle), math.cos(angle)))
-    st[MAG_INNOVATION] = innovation / DEG
-    st[MAG_SINCE_UPDATE] = 0.0
-    if innovation * innovation / total > s[S_MAG_GATE_CHI2]:
-        st[MAG_REJECTIONS] += 1.0
-        return flags | MAG_REJECTED
-    for i in range(N):
-        gain[i] = (cov[i, NORTH] - cov[i, HEADING]) / total
-    for i in range(N):
-        mean[i] += gain[i] * innovation
-        for j in range(N):
-            cov[i, j] -= gain[i] * row[j]
-    st[MAG_REJECTIONS] = 0.0
-    return flags | MAG_USED
-
-
-@njit(inline='always')
-def _reset_turn(st, angle):
-    st[MAG_ANCHOR] = angle
-    st[MAG_TURN_GYRO] = 0.0
-    st[MAG_TURN_S] = 0.0
-    st[MAG_TURN_M] = 0.0
-
-
-@njit
-def _turn_update(s, st, mean, cov, work, angle, variance, correlation_m, spread_xx, spread_xy, spread_yy):
-    """The reference's `_turn_update`: the gyro's bias and scale from the field's turn since the anchor."""
-    anchor, turn_gyro, turn_s = st[MAG_ANCHOR], st[MAG_TURN_GYRO], st[MAG_TURN_S]
-    scale, bias = 1.0 + mean[GYRO_SCALE], mean[BIAS]
-    predicted = scale * (turn_gyro - bias * turn_s)
-    seen = predicted + _wrap(-(angle - anchor) - predicted)
-    noise = (2.0 * variance * (1.0 - math.exp(-st[MAG_TURN_M] / correlation_m)) + s[S_MAG_TURN_VAR]
-             + _across(spread_xx, spread_xy, spread_yy, math.sin(anchor) - math.sin(angle),
-                       math.cos(angle) - math.cos(anchor)))
-    h_bias, h_scale = -scale * turn_s, turn_gyro - bias * turn_s
-    innovation = seen - predicted
-    gain, row = work[W_GAIN], work[W_ROW]
-    for j in range(N):
-        row[j] = h_bias * cov[BIAS, j] + h_scale * cov[GYRO_SCALE, j]
-    total = (h_bias * row[BIAS] + h_scale * row[GYRO_SCALE]) + noise
-    if innovation * innovation / total > s[S_MAG_GATE_CHI2]:
-        return MAG_REJECTED
-    for i in range(N):
-        gain[i] = (h_bias * cov[i, BIAS] + h_scale * cov[i, GYRO_SCALE]) / total
-    for i in range(N):
-        mean[i] += gain[i] * innovation
-        for j in range(N):
-            cov[i, j] -= gain[i] * row[j]
-    return MAG_USED
-
-
-@njit
-def _centre_spread(fit, radius, variance):
-    """The reference's `_centre_spread`."""
-    w = fit[2, 2]
-    mean_x, mean_y = fit[0, 2] / w, fit[1, 2] / w
-    sxx, sxy, syy = fit[0, 0] / w - mean_x * mean_x, fit[1, 0] / w - mean_y * mean_x, fit[1, 1] / w - mean_y * mean_y
-    scale = radius * radius * variance / (w * (sxx * syy - sxy * sxy))
-    return scale * syy, -scale * sxy, scale * sxx
-
-
-@njit(inline='always')
-def _across(xx, xy, yy, nx, ny):
-    return xx * nx * nx + 2.0 * xy * nx * ny + yy * ny * ny
-
-
-@njit
-def _learn_disturbance(s, stats, radius, step_m):
-    """The reference's `_learn_disturbance`, in place."""
-    forget = s[S_MAG_FORGET]
-    radius_mean = stats[M_RADIUS] / stats[M_WEIGHT] if stats[M_WEIGHT] > 0.0 else radius
-    residual = (radius - radius_mean) / radius_mean
-    if stats[M_WEIGHT] > 0.0:
-        stats[M_DIFF] = forget * stats[M_DIFF] + _pow2(residual - stats[M_LAST])
-        stats[M_STEP] = forget * stats[M_STEP] + step_m
-    stats[M_RADIAL] = forget * stats[M_RADIAL] + residual * residual
-    stats[M_RADIUS] = forget * stats[M_RADIUS] + radius
-    stats[M_WEIGHT] = forget * stats[M_WEIGHT] + 1.0
-    stats[M_LAST] = residual
-
-
-@njit
-def _mag_disturbance(s, stats):
-    """The reference's `mag_disturbance`: (heading variance, correlation length)."""
-    prior_weight, weight = s[S_MAG_LEVEL_WEIGHT], stats[M_WEIGHT]
-    variance = max((stats[M_RADIAL] + prior_weight * s[S_MAG_HEADING_VAR]) / (weight + prior_weight),
-                   s[S_MAG_FLOOR_VAR])
-    variance *= max(1.0, variance / s[S_MAG_TRUST_VAR])
-    correlation = s[S_MAG_CORRELATION_PRIOR]
-    if weight > 1.0 and stats[M_RADIAL] > 0.0:
-        ratio = 0.5 * (stats[M_DIFF] / stats[M_RADIAL])
-        step = stats[M_STEP] / weight
-        if ratio <= 0.0:
-            learned = s[S_MAG_CORRELATION_MAX]
-        elif ratio >= 1.0:
-            learned = s[S_MAG_CORRELATION_MIN]
-        else:
-            learned = -step / math.log(1.0 - ratio)
-        learned = min(max(learned, s[S_MAG_CORRELATION_MIN]), s[S_MAG_CORRELATION_MAX])
-        correlation = (weight * learned + prior_weight * correlation) / (weight + prior_weight)
-    return variance, correlation
-
-
-@njit(inline='always')
-def _sum3(a, b, c):
-    return 0.0 + a + b + c  # as Python's sum() (3.11): from 0, in order
-
-
-@njit
-def _wrap(angle):
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi  # numba's float % follows Python's sign rule
-
-
-@njit(inline='always')
 def _blend_gravity(st, sample, weight):
     """The reference's `_blend_unit` of the stored gravity towards this sample's accel, in place."""
     b0 = st[GRAVITY] + weight * (sample[V_ACCEL] - st[GRAVITY])
     b1 = st[GRAVITY + 1] + weight * (sample[V_ACCEL + 1] - st[GRAVITY + 1])
     b2 = st[GRAVITY + 2] + weight * (sample[V_ACCEL + 2] - st[GRAVITY + 2])
-    norm = math.sqrt(_sum3(b0 * b0, b1 * b1, b2 * b2))
+    norm = math.sqrt(sum3(b0 * b0, b1 * b1, b2 * b2))
     if norm == 0.0:
         norm = 1.0
     st[GRAVITY], st[GRAVITY + 1], st[GRAVITY + 2] = b0 / norm, b1 / norm, b2 / norm
 
 
-@njit
-def _level(sample, st):
-    """The field's horizontal part in chair (forward, left) axes, using the still-measured gravity."""
-    f0, f1, f2 = sample[V_MAG], sample[V_MAG + 1], sample[V_MAG + 2]
-    u0, u1, u2 = st[GRAVITY], st[GRAVITY + 1], st[GRAVITY + 2]
-    along_up = _sum3(f0 * u0, f1 * u1, f2 * u2)
-    h0, h1, h2 = f0 - along_up * u0, f1 - along_up * u1, f2 - along_up * u2
-    # forward axis levelled: chair x with its vertical part removed
-    w0, w1, w2 = 1.0 - u0 * u0, -u0 * u1, -u0 * u2
-    norm = math.sqrt(_sum3(w0 * w0, w1 * w1, w2 * w2))
-    if norm == 0.0:
-        norm = 1.0
-    w0, w1, w2 = w0 / norm, w1 / norm, w2 / norm
-    l0, l1, l2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
-    return _sum3(h0 * w0, h1 * w1, h2 * w2), _sum3(h0 * l0, h1 * l1, h2 * l2)
-
-
-@njit
-def _fit_add(fit, x, y, forget):
-    vector = (x, y, 1.0, _pow2(x) + _pow2(y))
-    for i in range(4):
-        for j in range(4):
-            fit[i, j] = forget * fit[i, j] + vector[i] * vector[j]
-
-
-@njit
-def _fit_centre(fit, lu, min_spread_sq, min_points):
-    """(found, centre x, centre y) of the circle x^2 + y^2 = a x + b y + c fitted to the moments.
-
-    Not found until the points spread around the circle: the smaller principal spread of the
-    points must reach `min_spread` of the radius (a full circle gives 1/sqrt(2) = 0.71).
-    """
-    weight = fit[2, 2]
-    if weight < min_points:
-        return False, 0.0, 0.0
-    mean_x, mean_y = fit[0, 2] / weight, fit[1, 2] / weight
-    scatter_xx = fit[0, 0] / weight - mean_x * mean_x
-    scatter_yx = fit[1, 0] / weight - mean_y * mean_x
-    scatter_yy = fit[1, 1] / weight - mean_y * mean_y
-    solved, a, b, c = _solve3(fit, lu)
-    if not solved:
-        return False, 0.0, 0.0
-    centre_x, centre_y = a / 2.0, b / 2.0
-    radius_sq = c + _pow2(centre_x) + _pow2(centre_y)
-    smallest = _smallest_eigenvalue(scatter_xx, scatter_yx, scatter_yy)
-    if radius_sq <= 0.0 or 2.0 * smallest < min_spread_sq * radius_sq:
-        return False, 0.0, 0.0
-    return True, centre_x, centre_y
-
-
-@njit
-def _solve3(fit, lu):
-    """fit[:3, :3] z = fit[:3, 3] as OpenBLAS's dgesv does it (numpy's solve); not solved if singular.
-
-    Left-looking LU with partial pivoting (getf2: the first largest |pivot|, the column below it
-    scaled by its reciprocal), then the two triangular solves (trsv: axpy updates, division by
-    the diagonal), with multiply-adds fused where OpenBLAS's kernels fuse them. `lu` (3 x 5) is
-    scratch: the matrix, then the right-hand side, then each row's pivot.
-    """
-    for i in range(3):
-        for k in range(4):
-            lu[i, k] = fit[i, k]
-    for j in range(3):
-        for i in range(j):  # the earlier row swaps, applied to this column
-            p = int(lu[i, 4])
-            lu[i, j], lu[p, j] = lu[p, j], lu[i, j]
-        if j == 1:  # the column less L times U above it
-            lu[1, 1] -= lu[1, 0] * lu[0, 1]
-            lu[2, 1] -= lu[2, 0] * lu[0, 1]
-        elif j == 2:
-            lu[1, 2] -= lu[1, 0] * lu[0, 2]
-            lu[2, 2] -= _fma(lu[2, 1], lu[1, 2], lu[2, 0] * lu[0, 2])
-        p = j
-        for r in range(j + 1, 3):
-            if abs(lu[r, j]) > abs(lu[p, j]):
-                p = r
-        lu[j, 4] = p
-        if lu[p, j] == 0.0:
-            return False, 0.0, 0.0, 0.0
-        reciprocal = 1.0 / lu[p, j]
-        for k in range(j + 1):  # swap the rows so far (not the right-hand side, not the pivots)
-            lu[j, k], lu[p, k] = lu[p, k], lu[j, k]
-        for r in range(j + 1, 3):
-            lu[r, j] *= reciprocal
-    for i in range(3):  # the right-hand side: row swaps, then L (unit diagonal), then U
-        p = int(lu[i, 4])
-        lu[i, 3], lu[p, 3] = lu[p, 3], lu[i, 3]
-    for i in range(3):
-        for k in range(i + 1, 3):
-            lu[k, 3] = _fma(-lu[i, 3], lu[k, i], lu[k, 3])
-    for i in range(2, -1, -1):
-        lu[i, 3] = lu[i, 3] / lu[i, i]
-        for k in range(i):
-            lu[k, 3] = _fma(-lu[i, 3], lu[k, i], lu[k, 3])
-    return True, lu[0, 3], lu[1, 3], lu[2, 3]
-
-
-@njit
-def _smallest_eigenvalue(d1, e, d2):
-    """Smaller eigenvalue of [[d1, e], [e, d2]] as numpy's eigvalsh gets it (LAPACK dsterf, dlae2)."""
-    if abs(e) <= math.sqrt(abs(d1)) * math.sqrt(abs(d2)) * LAPACK_EPS:
-        return min(d1, d2)  # already diagonal to working precision
-    e_sq = e * e
-    if e_sq <= (LAPACK_EPS * LAPACK_EPS) * abs(d1 * d2):
-        return min(d1, d2)
-    b = math.sqrt(e_sq)
-    a, c = (d2, d1) if abs(d2) < abs(d1) else (d1, d2)  # dsterf's QR or QL orientation
-    sm, adf, ab = a + c, abs(a - c), abs(b + b)
-    acmx, acmn = (a, c) if abs(a) > abs(c) else (c, a)
-    if adf > ab:
-        rt = adf * math.sqrt(1.0 + (ab / adf) * (ab / adf))
-    elif adf < ab:
-        rt = ab * math.sqrt(1.0 + (adf / ab) * (adf / ab))
-    else:
-        rt = ab * math.sqrt(2.0)
-    if sm < 0.0:
-        rt1 = 0.5 * (sm - rt)
-        rt2 = (acmx / rt1) * acmn - (b / rt1) * b
-    elif sm > 0.0:
-        rt1 = 0.5 * (sm + rt)
-        rt2 = (acmx / rt1) * acmn - (b / rt1) * b
-    else:
-        rt1, rt2 = 0.5 * rt, -0.5 * rt
-    return min(rt1, rt2)
