@@ -15,7 +15,10 @@ rad/s, magnetometer uT, in the phone frame (x right, y to the top of the screen,
   axis, sign from the gait) in a frame turning with the phone, so the gyro still carries turns.
 - Magnetometer: a gated aid only (the paper found it unusable on upper floors): edge/pedestrian/magnetic.py.
 - Uncertainty: a 3x3 covariance over (x, y, heading), propagated per step through the motion's
-  Jacobian with along-track (step length) and heading (gyro drift, scale) noise.
+  Jacobian with along-track (step length) and heading (gyro drift, scale) noise, kept inside a 4x4
+  that adds the step length's scale error (K off for this walker): a per-step 8 % scatter averages
+  out over a walk, a wrong K does not, it stretches the whole track (docs/pdr-estimator.md, "How
+  honest the edge's covariance is").
 Heading: counter-clockwise from the venue's +x axis, radians.
 
 `PdrEstimator` is a small class because imufusion's Ahrs is a mutable C object; its state is
@@ -94,6 +97,12 @@ class PdrSettings:
     step_gain_min_sum: float = 10.0  # learn K only over this many Weinberg units (about 10 steps)
     step_gain_min_displacement_m: float = 10.0  # ... and stands this far apart (a 3 deg heading error is 5 %)
     step_length_sd_fraction: float = 0.08  # per-step length error (Weinberg: ~8 % of distance)
+    # The scale error of K for a walker it was not learned on (relative SD), shared by every step
+    # until a second stand re-learns K: 0.16, chosen from 0.12-0.16 on the ILC site 1 tune half
+    # (every other walk of each floor) as the one whose NEES at the waypoints has the median an
+    # honest 2-D covariance has (1.39: 1.35 there, 0.94 on the report half); the walks' own best
+    # scales spread 0.52-1.15 (docs/pdr-estimator.md).
+    step_scale_sd: float = 0.16
     heading_drift_sd_rad_per_sqrt_s: float = 0.004  # residual gyro bias, walking sway
     gyro_scale_sd: float = 0.01  # heading error per radian turned (phone gyro scale)
     stand_position_sd_m: float = 0.3  # a QR stand's pose fix (algorithms.md)
@@ -121,6 +130,7 @@ class PdrState:
     weinberg_since_stand: float
     gaps: int
     backwards: int
+    step_scale_sd: float  # the relative SD of K for this walker (the 4x4's scale entry)
 
 
 class PdrEstimator:
@@ -145,7 +155,8 @@ class PdrEstimator:
         self.time_ns = -1
         self.x_m = self.y_m = 0.0
         self.heading_offset_rad = 0.0
-        self.covariance = np.diag([1e6, 1e6, math.pi ** 2])  # no pose until a stand
+        # over (x m, y m, heading rad, step-length scale): the published covariance is its top-left 3x3
+        self.covariance = np.diag([1e6, 1e6, math.pi ** 2, settings.step_scale_sd ** 2])  # no pose until a stand
         self.step_gain_m = settings.step_gain_m
         self.steps = StepState()
         self.stand: tuple[float, float] | None = None
@@ -214,8 +225,10 @@ class PdrEstimator:
         cos_h, sin_h = math.cos(heading), math.sin(heading)
         self.x_m += length * cos_h
         self.y_m += length * sin_h
-        jacobian = np.array([[1.0, 0.0, -length * sin_h], [0.0, 1.0, length * cos_h], [0.0, 0.0, 1.0]])
-        along = np.array([cos_h, sin_h, 0.0])
+        scaled = 0.0 if self.on_stairs else length  # a tread's length is not K's
+        jacobian = np.array([[1.0, 0.0, -length * sin_h, scaled * cos_h], [0.0, 1.0, length * cos_h, scaled * sin_h],
+                             [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+        along = np.array([cos_h, sin_h, 0.0, 0.0])
         heading_var = (settings.heading_drift_sd_rad_per_sqrt_s ** 2 * event.duration_s
                        + (settings.gyro_scale_sd * self.turn_since_step_rad) ** 2)
         noise = (settings.step_length_sd_fraction * length) ** 2 * np.outer(along, along)
@@ -229,7 +242,8 @@ class PdrEstimator:
             measured = self.magnetic.measurement()
             if measured is not None and self.stand is not None:
                 heading += self._magnetic_update(self.magnetic, measured)
-        return PdrStep(event.time_ns, self.x_m, self.y_m, wrap(heading), length, self.covariance.copy(), event.count)
+        return PdrStep(event.time_ns, self.x_m, self.y_m, wrap(heading), length, self.covariance[:3, :3].copy(),
+                       event.count)
 
     def _step_direction_rad(self) -> float:
         """The step's direction in Fusion's frame: the forward axis's heading averaged over the step,
@@ -269,6 +283,7 @@ class PdrEstimator:
         if self.time_ns < 0:
             self.pending_stand = (time_ns, x_m, y_m, heading_rad, tilt_rad, heading_sd_rad)
             return
+        scale_variance = float(self.covariance[3, 3])
         if self.stand is not None and self.weinberg_since_stand >= settings.step_gain_min_sum:
             # The surveyed displacement between the stands over the dead-reckoned one: the walk
             # between them need not be straight (a route through corridors), only the heading good.
@@ -278,6 +293,11 @@ class PdrEstimator:
                 learned = min(max(self.step_gain_m * surveyed_m / reckoned_m, settings.step_gain_min_m),
                               settings.step_gain_max_m)
                 self.step_gain_m += settings.step_gain_smoothing * (learned - self.step_gain_m)
+                # The learned K's own relative error: both stands' position errors over the surveyed
+                # distance; the smoothing blends it with the previous K's as independent estimates.
+                measured_variance = 2.0 * settings.stand_position_sd_m ** 2 / surveyed_m ** 2
+                weight = settings.step_gain_smoothing
+                scale_variance = (1.0 - weight) ** 2 * scale_variance + weight ** 2 * measured_variance
         if tilt_rad is not None:
             yaw = self.axis_heading_rad(STAND_AXIS) - math.pi / 2.0  # the levelled phone's +y at yaw + 90 deg
             self.ahrs.set_quaternion(quaternion_multiply(axis_angle(2, yaw), axis_angle(0, tilt_rad)))
@@ -292,14 +312,15 @@ class PdrEstimator:
         # The phone left its mount for the stand: how it sits when it goes back is unknown.
         self.direction = DirectionState()
         heading_sd = heading_sd_rad if heading_sd_rad else settings.stand_heading_sd_rad
-        self.covariance = np.diag([settings.stand_position_sd_m ** 2, settings.stand_position_sd_m ** 2, heading_sd ** 2])
+        self.covariance = np.diag([settings.stand_position_sd_m ** 2, settings.stand_position_sd_m ** 2, heading_sd ** 2,
+                                   scale_variance])  # K's error stays the walker's; the track restarts here
 
     def snapshot(self) -> PdrState:
-        return PdrState(self.time_ns, self.x_m, self.y_m, self.heading_offset_rad, self.covariance.copy(),
+        return PdrState(self.time_ns, self.x_m, self.y_m, self.heading_offset_rad, self.covariance[:3, :3].copy(),
                         np.array(self.ahrs.get_quaternion()), np.array(self.bias.get_offset()), self.step_gain_m,
                         self.steps, None if self.stand is None else self.stand[0],
                         None if self.stand is None else self.stand[1], self.weinberg_since_stand, self.gaps,
-                        self.backwards)
+                        self.backwards, math.sqrt(float(self.covariance[3, 3])))
 
 
 def wrap(angle_rad: float) -> float:

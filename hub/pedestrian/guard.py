@@ -12,9 +12,10 @@ watches two signs, per pose:
   problem, counted (`fixes_off_map`); the cloud is drawn only within `reacquire_radius_m` of it,
   never re-seeded away from it.
 Two other signs were measured and left out (docs/pdr-estimator.md, "The map guard"): the
-distance between the filter and the edge in the edge's covariance (the phone edge's covariance
-is overconfident on the ILC walks, NEES median 10.5 where 1.4 is honest, so the gate fired where
-the filter was right: pooled p75 3.13 -> 3.65 m), and the share of weight walls kill per step
+distance between the filter and the edge in the edge's covariance (with the edge's covariance
+overconfident it fired where the filter was right, pooled p75 3.13 -> 3.65 m; now that it is
+honest the filter's losses on the ILC walks lie inside it, so it catches nothing there and still
+costs where the filter helps), and the share of weight walls kill per step
 (a wall across a corridor kills many particles of a right cloud too; every contradicting plan
 tried that it caught, re-seeds caught as well).
 

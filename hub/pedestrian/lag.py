@@ -5,8 +5,10 @@ The refined pose for a step is the weighted mean, with the weights of `lag_steps
 of the surviving particles' positions at that step: the walls met since then have pruned the
 ancestries that could not have led here. When the matcher resamples, the histories are copied with
 their particles; when it re-seeds (a stand reset, or every particle died) the ancestry is broken,
-so every step still waiting is finished at once with the current weights. Memory: two
-(lag_steps x particles) arrays, a few rows of scalars; work per step O(particles), O(lag x particles)
+so every step still waiting is finished at once with the current weights. A refined pose's
+covariance is its particles' spread plus what the live pose added to the cloud's (the dead
+reckoning's share: hub/pedestrian/particles.py). Memory: two (lag_steps x particles) arrays,
+a few rows of scalars and 3x3s; work per step O(particles), O(lag x particles)
 per resample.
 """
 
@@ -32,13 +34,14 @@ class LagHistory:
         self.y_m = np.zeros((lag_steps, particles))
         self.time_ns = np.zeros(lag_steps, dtype=np.int64)
         self.heading_rad = np.zeros(lag_steps)
+        self.added = np.zeros((lag_steps, 3, 3))  # covariance the live pose added to its cloud's
         self.start = 0  # ring index of the oldest step waiting
         self.waiting = 0
 
     def record(self, time_ns: int, heading_rad: float, x_m: np.ndarray, y_m: np.ndarray,
-               weight: np.ndarray) -> list[MatchedPose]:
-        """Add a step (the particles after it, the live heading); returns the step that leaves the
-        window, refined, when the window was full."""
+               weight: np.ndarray, added_covariance: np.ndarray | None = None) -> list[MatchedPose]:
+        """Add a step (the particles after it, the live heading, the covariance the live pose added
+        to its cloud's); returns the step that leaves the window, refined, when the window was full."""
         out = [self._finish(self.start, weight)] if self.waiting == self.lag_steps else []
         if out:
             self.start = (self.start + 1) % self.lag_steps
@@ -46,6 +49,7 @@ class LagHistory:
         row = (self.start + self.waiting) % self.lag_steps
         self.x_m[row], self.y_m[row] = x_m, y_m
         self.time_ns[row], self.heading_rad[row] = time_ns, heading_rad
+        self.added[row] = 0.0 if added_covariance is None else added_covariance
         self.waiting += 1
         return out
 
@@ -72,6 +76,6 @@ class LagHistory:
                 nearest = alive[np.argmin(np.hypot(x_m[alive] - mean_x, y_m[alive] - mean_y))]
                 mean_x, mean_y = float(x_m[nearest]), float(y_m[nearest])
         deviations = np.stack([x_m - mean_x, y_m - mean_y])
-        covariance = np.zeros((3, 3))
-        covariance[:2, :2] = (deviations * weight) @ deviations.T
+        covariance = self.added[row].copy()
+        covariance[:2, :2] += (deviations * weight) @ deviations.T
         return MatchedPose(int(self.time_ns[row]), mean_x, mean_y, float(self.heading_rad[row]), covariance)

@@ -22,7 +22,9 @@ TURN_SETTLE_S after each turn, and for the paper's snap whether it snapped to th
 Where the truth names floors (a building of several), each pose's floor (the edge's, from the last
 stand and the barometer: edge/pedestrian/floors.py) is scored too: the share of waypoints on the
 right floor, and the IPIN competitions' score, p75 of the horizontal error plus FLOOR_PENALTY_M
-for each floor wrong.
+for each floor wrong. Each track's covariance is scored too: the median over waypoints of the
+position NEES e' P^-1 e with the covariance of the last pose at or before the waypoint (honest:
+1.39, the median of a chi-square with 2 degrees of freedom).
 """
 
 from __future__ import annotations
@@ -61,15 +63,39 @@ def is_pedestrian_session(data: SessionData) -> bool:
 
 @dataclass
 class Track:
-    """One agent's output poses in time order (time ns, x m, y m, heading rad, floor)."""
+    """One agent's output poses in time order (time ns, x m, y m, heading rad, floor) and each
+    one's 2x2 position covariance (None: the pose gave none, a stand's)."""
 
     rows: list[tuple[int, float, float, float, int]] = field(default_factory=list)
+    covariances: list[np.ndarray | None] = field(default_factory=list)
 
-    def add(self, time_ns: int, x_m: float, y_m: float, heading_rad: float, floor: int = 0) -> None:
+    def add(self, time_ns: int, x_m: float, y_m: float, heading_rad: float, floor: int = 0,
+            covariance: Any = None) -> None:
+        position = None if covariance is None or len(covariance) != 9 else \
+            np.asarray(covariance, dtype=float).reshape(3, 3)[:2, :2]
         if self.rows and time_ns <= self.rows[-1][0]:
             self.rows[-1] = (time_ns, x_m, y_m, heading_rad, floor)  # a reset at a step's time replaces it
+            self.covariances[-1] = position
         else:
             self.rows.append((time_ns, x_m, y_m, heading_rad, floor))
+            self.covariances.append(position)
+
+    def nees(self, time_ns: np.ndarray, dx_m: np.ndarray, dy_m: np.ndarray) -> np.ndarray:
+        """e' P^-1 e of each error (estimate - truth) at these times, P the covariance of the last
+        pose at or before it; NaN where that pose has none, inf where it is singular."""
+        out = np.full(len(time_ns), math.nan)
+        if not self.rows:
+            return out
+        times = np.array([row[0] for row in self.rows], dtype=np.int64)
+        for i, index in enumerate(np.searchsorted(times, time_ns, side="right") - 1):
+            covariance = self.covariances[index] if index >= 0 else None
+            if covariance is not None:
+                error = np.array([dx_m[i], dy_m[i]])
+                try:
+                    out[i] = float(error @ np.linalg.solve(covariance, error))
+                except np.linalg.LinAlgError:  # a collapsed covariance claims no error at all
+                    out[i] = math.inf
+        return out
 
     def floor_at(self, time_ns: np.ndarray) -> np.ndarray:
         """The floor of the last pose at or before each time (the first pose's before it)."""
@@ -128,6 +154,7 @@ class WaypointErrors:
     session: str
     errors_m: np.ndarray
     heading_errors_deg: np.ndarray
+    nees: np.ndarray = field(default_factory=lambda: np.array([]))  # per waypoint (NaN: no covariance there)
     floor_errors: np.ndarray = field(default_factory=lambda: np.array([], dtype=np.int64))  # |floor - true| per waypoint
     floors_in_truth: bool = False  # the truth names floors (a building of several)
     snaps_correct: int | None = None
@@ -203,7 +230,7 @@ def run_method(session: Session, inputs: list[Any], method: str, area: WalkableA
                 _take(run, hub.on_message(message))
             continue
         for pose in edge.push(message):
-            run.edge.add(pose.timestamp_ns, pose.x_m, pose.y_m, pose.heading_rad, pose.floor)
+            run.edge.add(pose.timestamp_ns, pose.x_m, pose.y_m, pose.heading_rad, pose.floor, pose.covariance)
             if hub is not None:
                 _take(run, hub.on_message(pose))
     for run, _, hub in runs.values():
@@ -224,7 +251,7 @@ def _take(run: PhoneRun, outputs: list[Any]) -> None:
             run.live_poses += 1
             run.fallback_poses += bool(out.map_fallback)
         if track is not None:
-            track.add(out.timestamp_ns, out.x_m, out.y_m, out.heading_rad, out.floor)
+            track.add(out.timestamp_ns, out.x_m, out.y_m, out.heading_rad, out.floor, out.covariance)
 
 
 def read_inputs(path: Path) -> list[Any]:
@@ -291,7 +318,7 @@ def score(data: SessionData, path: Path, method: str, mount: str, runs: list[Pho
     """Waypoint errors (and heading after turns, snaps) of these phones' tracks: "edge" (no map
     matching), or the hub's "live" or "refined"."""
     map_matching = track_name != "edge"
-    errors, heading_errors, floor_errors = [], [], []
+    errors, heading_errors, floor_errors, nees = [], [], [], []
     turns = data.session.source.get("turns", []) if isinstance(data.session.source, dict) else []
     for run in runs:
         track = {"edge": run.edge, "live": run.hub, "refined": run.refined}[track_name] or run.edge
@@ -302,6 +329,7 @@ def score(data: SessionData, path: Path, method: str, mount: str, runs: list[Pho
         after = truth.time_ns > scans[0].timestamp_ns
         x, y, _ = track.at(truth.time_ns[after])
         errors.append(np.hypot(x - truth.x_m[after], y - truth.y_m[after]))
+        nees.append(track.nees(truth.time_ns[after], x - truth.x_m[after], y - truth.y_m[after]))
         true_floor = truth.floor[after] if truth.floor is not None else np.zeros(int(after.sum()), dtype=np.int64)
         floor_errors.append(np.abs(track.floor_at(truth.time_ns[after]) - true_floor))
         agent_turns = [t for t in turns if t.get("agent_id", run.agent_id) == run.agent_id]
@@ -316,6 +344,7 @@ def score(data: SessionData, path: Path, method: str, mount: str, runs: list[Pho
                          path.name,
                          np.concatenate(errors) if errors else np.array([]),
                          np.concatenate(heading_errors) if heading_errors else np.array([]),
+                         np.concatenate(nees) if nees else np.array([]),
                          np.concatenate(floor_errors) if floor_errors else np.array([], dtype=np.int64),
                          any(truth.floor is not None for truth in data.truth.values()))
     if track_name == "live" and method == "paper" and turns:
@@ -378,6 +407,13 @@ def floor_score(rows: list[WaypointErrors]) -> dict[str, Any]:
             "ipin_score_m": round(float(np.percentile(errors + FLOOR_PENALTY_M * wrong, 75)), 3)}
 
 
+def nees_median(rows: list[WaypointErrors]) -> float | None:
+    """The median position NEES over these rows' waypoints that have a covariance (None: none has)."""
+    values = np.concatenate([r.nees for r in rows]) if rows else np.array([])
+    values = values[np.isfinite(values)]
+    return round(float(np.median(values)), 3) if len(values) else None
+
+
 def _snaps(rows: list[WaypointErrors]) -> dict[str, int] | None:
     if any(r.snaps_total is None for r in rows):
         return None
@@ -391,6 +427,7 @@ def to_json(report: PedestrianReport) -> dict[str, Any]:
         results.append({"method": method, "map_matching": map_matching, "matcher": matcher, "track": track,
                         "mount": mount,
                         "waypoints": int(len(errors)), "waypoint_error_m": _percentiles(errors),
+                        "nees_median": nees_median(rows),
                         "heading_error_after_turn_deg": _percentiles(headings) if len(headings) else None,
                         "turn_snaps": _snaps(rows),
                         "map_fallback": ({"poses": sum(r.fallback_poses for r in rows),
@@ -410,7 +447,7 @@ def to_table(report: PedestrianReport) -> str:
     lines = [f"{len(report.sessions)} pedestrian session(s): position error at the truth waypoints after the "
              "first stand (m)",
              f"{'method':8} {'phone':7} {'map matching':36} {'waypoints':>9} {'median':>7} {'p75':>7} {'p90':>7} "
-             f"{'heading after turns p90 deg':>28} {'turn snaps':>18}"]
+             f"{'NEES':>6} {'heading after turns p90 deg':>28} {'turn snaps':>18}"]
     for (method, map_matching, matcher, track, mount), errors, headings, rows in pooled(report):
         p = _percentiles(errors)
         matcher = matcher + (", refined" if track == "refined" else "")
@@ -418,7 +455,7 @@ def to_table(report: PedestrianReport) -> str:
         snaps = _snaps(rows)
         snap_text = "-" if snaps is None else f"{snaps['correct']}/{snaps['true_turns']}, {snaps['wrong']} wrong"
         lines.append(f"{method:8} {mount:7} {(matcher if map_matching else 'none'):36} {len(errors):9d} {fmt(p['median']):>7} "
-                     f"{fmt(p['p75']):>7} {fmt(p['p90']):>7} {fmt(h):>28} {snap_text:>18}")
+                     f"{fmt(p['p75']):>7} {fmt(p['p90']):>7} {fmt(nees_median(rows)):>6} {fmt(h):>28} {snap_text:>18}")
     if len(report.sessions) > 1:
         lines += ["", "p75 per session (m): " + ", ".join(
             f"{key[0]}{'+' + key[2] if key[1] else ''}{' refined' if key[3] == 'refined' else ''} ({key[4]})"

@@ -192,3 +192,55 @@ def test_hub_without_a_map_passes_poses_on():
     hub = PedestrianHub(session())
     out = hub.on_message(pose(1.0, 3.0, 4.0))
     assert (out[0].x_m, out[0].y_m) == (3.0, 4.0) and hub.agents["walker"].matcher is None
+
+
+def test_a_wrong_step_length_stretches_the_track_and_the_covariance_says_how_far():
+    """K's error is shared by every step: after a straight walk the along-track SD grows with the
+    distance walked (step_scale_sd of it), the cross-track SD does not; the heading, x and y are
+    what they were without the term (it only adds to the covariance)."""
+    estimator = PdrEstimator()
+    rows = walk_rows(30.0)
+    estimator.step(rows[0])
+    estimator.reset_to_stand(rows[0].time_ns, 2.0, 5.0, 0.0)
+    steps = [step for row in rows[1:] for step in estimator.step(row)]
+    walked_m = math.hypot(steps[-1].x_m - 2.0, steps[-1].y_m - 5.0)
+    assert walked_m > 20.0
+    covariance = steps[-1].covariance
+    assert covariance.shape == (3, 3)
+    scale_sd = estimator.settings.step_scale_sd
+    along_sd, cross_sd = math.sqrt(covariance[0, 0]), math.sqrt(covariance[1, 1])  # walking along +x
+    assert along_sd == pytest.approx(math.hypot(scale_sd * walked_m, along_sd_without_scale(steps)), rel=0.05)
+    assert cross_sd < 0.5 * along_sd
+    assert estimator.snapshot().step_scale_sd == pytest.approx(scale_sd)
+
+
+def along_sd_without_scale(steps: list) -> float:
+    """The along-track SD the per-step scatter and the stand give (independent per step)."""
+    fraction = PdrEstimator().settings.step_length_sd_fraction
+    stand_sd = PdrEstimator().settings.stand_position_sd_m
+    return math.sqrt(stand_sd ** 2 + sum((fraction * step.step_length_m) ** 2 for step in steps))
+
+
+def test_the_scale_error_survives_a_stand_and_shrinks_when_k_is_learned():
+    """A stand restarts the position, not K's error; a second stand far enough away re-learns K
+    and its error becomes the learned one's (the stands' positions over the distance), blended."""
+    estimator = PdrEstimator()
+    rows = walk_rows(20.0)
+    estimator.step(rows[0])
+    estimator.reset_to_stand(rows[0].time_ns, 2.0, 5.0, 0.0)
+    for row in rows[1:]:
+        estimator.step(row)
+    settings = estimator.settings
+    walked_m = estimator.x_m - 2.0
+    assert walked_m > settings.step_gain_min_displacement_m
+    # a stand as far as the walk went, 20 % further: K is learned from it
+    surveyed_m = 1.2 * walked_m
+    estimator.reset_to_stand(rows[-1].time_ns, 2.0 + surveyed_m, 5.0, 0.0)
+    weight = settings.step_gain_smoothing
+    expected = math.sqrt((1 - weight) ** 2 * settings.step_scale_sd ** 2
+                         + weight ** 2 * 2 * settings.stand_position_sd_m ** 2 / surveyed_m ** 2)
+    assert estimator.snapshot().step_scale_sd == pytest.approx(expected)
+    assert estimator.snapshot().covariance[0, 0] == pytest.approx(settings.stand_position_sd_m ** 2)
+    # a stand right after (too close to learn from) keeps it
+    estimator.reset_to_stand(rows[-1].time_ns, 2.0 + surveyed_m, 5.0, 0.0)
+    assert estimator.snapshot().step_scale_sd == pytest.approx(expected)

@@ -120,6 +120,30 @@ def test_refined_track_lags_by_its_steps_stays_walkable_and_is_no_worse(paper_wa
     assert matcher.lag is not None and matcher.lag.x_m.shape == (lag, 300)
 
 
+def test_published_covariance_adds_the_dead_reckonings_share_to_the_clouds(paper_walk):
+    """The cloud alone understates the error (docs/pdr-estimator.md): live and refined poses carry
+    the cloud's spread plus `edge_covariance_share` of the pose's own covariance; where they are
+    is untouched by it."""
+    time_ns, truth, poses = paper_walk
+    with_covariance = [DeadReckonedPose(p.time_ns, p.x_m, p.y_m, p.heading_rad,
+                                        np.diag([0.1 + 0.01 * i, 0.2 + 0.01 * i, 0.003]))
+                       for i, p in enumerate(poses[:200])]
+    tracks = {}
+    for share in (0.0, 0.5):
+        matcher = ParticleMatcher(PAPER_AREA, ParticleSettings(particles=300, seed=0, smoothing_lag_steps=10,
+                                                               edge_covariance_share=share))
+        live = run(matcher, time_ns, truth, with_covariance)[1:]
+        tracks[share] = (live, matcher.refined() + matcher.flush())
+    (live0, refined0), (live5, refined5) = tracks[0.0], tracks[0.5]
+    assert [(p.x_m, p.y_m) for p in live0] == [(p.x_m, p.y_m) for p in live5]
+    assert [(p.x_m, p.y_m) for p in refined0] == [(p.x_m, p.y_m) for p in refined5]
+    for a, b, pose in zip(live0, live5, with_covariance[1:]):
+        np.testing.assert_allclose(b.covariance - a.covariance, 0.5 * pose.covariance, atol=1e-12)
+    assert len(refined5) == len(live5)
+    for a, b, pose in zip(refined0, refined5, with_covariance[1:]):
+        np.testing.assert_allclose(b.covariance - a.covariance, 0.5 * pose.covariance, atol=1e-12)
+
+
 U_POINTS = (MapPoint("A", 0.0, 0.0, (0.0,)), MapPoint("B", 20.0, 0.0, (180.0, 90.0)),
             MapPoint("C", 20.0, 4.0, (270.0, 180.0)), MapPoint("D", 0.0, 4.0, (0.0,)))
 

@@ -1,17 +1,19 @@
-"""`reckon eval` on pedestrians: the map guard's fall-back poses are counted, and the truth
-positions are checked against the walkable area the hub matches on."""
+"""`reckon eval` on pedestrians: the map guard's fall-back poses are counted, the truth
+positions are checked against the walkable area the hub matches on, and each track's covariance
+is scored (NEES)."""
 
 from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
 
+import numpy as np
 import pytest
 import shapely
 import shapely.affinity
 
 from protocol.session_log import read_session
-from reckon.evaluation.pdr_eval import evaluate_pedestrians, to_json, to_table
+from reckon.evaluation.pdr_eval import Track, evaluate_pedestrians, to_json, to_table
 from sim_devices.pedestrian import simulate_pedestrian
 
 
@@ -64,3 +66,18 @@ def test_the_walkable_area_is_the_same_for_the_simulator_and_the_hub(office_walk
     assert shapely.equals(shapely.normalize(simulated), shapely.normalize(plan_area(venue.floor_plan)))
     hub = WalkableArea.from_venue(venue).geometry
     assert hub.covers(simulated)  # the hub's reads the plan's lines as good to its tolerance
+
+
+def test_nees_scores_each_track_against_its_own_covariance(office_walk: Path):
+    """e' P^-1 e with the covariance of the last pose at or before each waypoint; none before the
+    first pose with one; every reckon row has its median, the table a column."""
+    track = Track()
+    track.add(0, 0.0, 0.0, 0.0)  # a stand: no covariance
+    track.add(10, 1.0, 0.0, 0.0, covariance=[4.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.1])
+    track.add(20, 2.0, 0.0, 0.0, covariance=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.1])
+    nees = track.nees(np.array([5, 15, 25]), np.array([1.0, 2.0, 1.0]), np.array([0.0, 1.0, -2.0]))
+    assert np.isnan(nees[0]) and nees[1] == pytest.approx(2.0 ** 2 / 4.0 + 1.0) and nees[2] == pytest.approx(5.0)
+    result = to_json(evaluate_pedestrians([(read_session(office_walk), office_walk)]))
+    for row in result["results"]:
+        if row["method"] == "reckon":
+            assert 0.0 < row["nees_median"] < 1e3
