@@ -12,6 +12,8 @@ can be compared bin by bin:
 - `moving` (0/1): speed above MOVING_MPS; for a pedestrian, activity above its threshold.
 - `height` (m): a track's reported head height, where the tracker gives one; `StatureProfile`
   learns which heights each agent's motion matches.
+- `vertical` (g): an agent's mean vertical acceleration (gravity removed) over the bin; against a
+  track's heights it shows whether they step together (hub/identity/gait.py).
 
 Everything is stored in fixed rings of CAPACITY bins (the comparison window plus margin), so
 memory is constant per agent and per live track.
@@ -175,7 +177,7 @@ class StatureProfile:
 class AgentCues:
     """One agent's cues from its body IMU (pedestrian waist, chair seat) and, for chairs, its edge poses."""
 
-    NAMES = ("activity", "heading", "speed_dr", "heading_dr", "vx_dr", "vy_dr", "tilt")
+    NAMES = ("activity", "heading", "speed_dr", "heading_dr", "vx_dr", "vy_dr", "tilt", "vertical")
 
     def __init__(self, agent_id: str, sensor_id: str, rate_hz: float):
         self.agent_id = agent_id
@@ -192,6 +194,7 @@ class AgentCues:
         self.upright = np.zeros(3)  # forgetting sum of the gravity direction (sensor frame) while walking
         self.newest_imu_bin = NO_BIN  # the newest bins its data has reached (a bin is complete once a later one is)
         self.newest_pose_bin = NO_BIN
+        self.vertical_carry = (NO_BIN, 0.0, 0)  # the last bin's (number, sum, samples) so far: a batch may end inside it
 
     def complete_bin(self) -> int:
         """The newest bin whose cues are all in: both its IMU and, once poses come, its poses have passed it."""
@@ -219,9 +222,16 @@ class AgentCues:
         bins = time_ns // BIN_NS
         self.newest_imu_bin = max(self.newest_imu_bin, int(bins[-1]))
         ends = np.flatnonzero(np.diff(np.append(bins, bins[-1] + 1)) != 0)  # last sample of each bin
-        for i in ends:
+        starts = np.concatenate([[0], ends[:-1] + 1])
+        sums, counts = np.add.reduceat(vertical, starts), np.diff(np.append(starts, len(bins)))
+        carry_bin, carry_sum, carry_count = self.vertical_carry
+        if int(bins[0]) == carry_bin:
+            sums[0] += carry_sum
+            counts[0] += carry_count
+        self.vertical_carry = (int(bins[-1]), float(sums[-1]), int(counts[-1]))
+        for k, i in enumerate(ends):
             self.ring.put(int(bins[i]), activity=float(np.sqrt(max(power[i], 0.0))), heading=float(heading[i]),
-                          tilt=float(tilt[i]))
+                          tilt=float(tilt[i]), vertical=float(sums[k] / counts[k]))
 
     def _tilt(self, unit: np.ndarray, activity_g: np.ndarray) -> np.ndarray:
         """Degrees between each sample's gravity direction and the one while walking (learnt here, NaN until

@@ -9,7 +9,9 @@ order of people. Here every hop (hop_s of camera time) the newest bins of motion
 - direction (chairs): a moving track's course against the dead-reckoned one, less the pair's usual angle;
 - position: the track against where the agent was last seen or, for a chair, the hub's pose;
 - stature (trackers that report head heights): how much worse the agent's motion has matched tracks
-  of this head height than of its best-matching one, over the session (StatureProfile).
+  of this head height than of its best-matching one, over the session (StatureProfile);
+- gait phase (pedestrians, trackers that report head heights): whether the track's head bobs in step
+  with the agent's waist over the last seconds (hub/identity/gait.py).
 Each bin gives a normalised squared error per cue (about 1 for the right pair). A pair's evidence
 is the forgetting mean of its bins' costs (factor forget_per_s per second, after a prior that
 makes a new track earn its identity). The assignment is the Hungarian method (scipy) over tracks
@@ -42,6 +44,7 @@ from hub.identity.assign import BIG, components, exclusion_margin, padded, swap_
 from hub.identity.book import Lost, Track, identity_message
 from hub.identity.cues import (BIN_NS, BIN_S, MOVING_MPS, TRACK_DELAY_BINS, TURN_BINS, AgentCues, StatureProfile,
                                SpeedModel, TrackCues, agent_hop_blocks, track_hop_cues)
+from hub.identity.gait import LAGS, PAD_BINS, WINDOW_BINS, GaitPhase
 from hub.identity.rules import TrackRules
 from hub.identity.settings import IdentityCounters, IdentitySettings
 from protocol import messages
@@ -89,6 +92,8 @@ class IdentityEngine:
         self.seen_ns = np.zeros(count, dtype=np.int64)
         self.speed_model = SpeedModel()
         self.statures = StatureProfile(count)
+        self.gait = GaitPhase(settings.gait_weight)
+        self.gait_correlations: np.ndarray | None = None  # the last hop's (tracks, agents, lags), for learning
         self.tracks: dict[tuple[str, int], Track] = {}
         self.lost: dict[int, Lost] = {}  # agent -> where its last track broke off (until it holds another)
         self.scored_until: dict[str, int] = {}  # camera -> first bin not yet scored
@@ -204,6 +209,10 @@ class IdentityEngine:
         out += self._assign(camera, keys, tracks, evidence, now_ns)
         out += self._fixes(camera, tracks, evidence, now_ns, camera_sd_m, end * BIN_NS)
         self._learn_speed(tracks, evidence, first, count)
+        if self.gait_correlations is not None:  # pedestrians held with clear evidence teach the gait cue
+            self.gait.learn(self.gait_correlations, [(row, t.agent) for row, t in enumerate(tracks) if t.agent >= 0
+                                                     and self.is_pedestrian[t.agent]
+                                                     and evidence[row, t.agent] <= s.fix_cost])
         if end >= self.next_lag_bin.get(camera, end):
             self.next_lag_bin[camera] = end + int(s.lag_every_s / BIN_S)
             self._search_lag(camera, tracks, end)
@@ -263,7 +272,26 @@ class IdentityEngine:
             with np.errstate(invalid="ignore"):
                 self.statures.learn(cues["height"], motion, t_speed > MOVING_MPS)
             excess = excess + np.where(np.isfinite(stature), s.stature_weight * stature, 0.0)
+        self.gait_correlations = None
+        if s.gait_weight > 0 and self.is_pedestrian.any() and np.isfinite(cues["height"]).any():
+            phase = self._gait_cost(tracks, first + count)
+            excess = excess + np.where(np.isfinite(phase), phase, 0.0)[:, :, None]
         return np.where(present[0], excess, np.nan)
+
+    def _gait_cost(self, tracks: list[Track], end: int) -> np.ndarray:
+        """(tracks, agents) gait-phase cost over the window ending at bin `end` (exclusive); NaN for
+        chairs and where not compared."""
+        read = WINDOW_BINS + PAD_BINS
+        heights = np.stack([t.cues.ring.window("height", end - read, read) for t in tracks])
+        span = int(LAGS.max() - LAGS.min())
+        start = end - read - int(LAGS.max())
+        blocks = np.stack([a.ring.block(start, read + span) for a in self.agents])
+        rows = self.agents[0].ring.row
+        vertical, activity = blocks[:, rows["vertical"]], blocks[:, rows["activity"]]
+        correlations = self.gait.correlations(heights, vertical, activity)
+        correlations[:, ~self.is_pedestrian] = np.nan
+        self.gait_correlations = correlations
+        return self.gait.cost(correlations)
 
     def _stature_cost(self, height_m: np.ndarray, tilt_deg: np.ndarray) -> np.ndarray:
         """(tracks, agents, bins) from the stature profile; for an agent whose waist says it sits (tilted

@@ -45,6 +45,8 @@ class IdentitySettings:
     lag_every_s: float = 5.0
     stature_weight: float = 4.0  # per bin, x how much worse the agent's motion matched tracks of this height (0: off)
     seated_tilt_deg: float = 5.0  # ... except for an agent whose waist leans this far from walking upright (seated)
+    # pedestrians, per bin: x (a right pair's correlation of head bob and waist - this pair's) (0: off)
+    gait_weight: float = 4.0
     speed_sd_mps: float = 0.35
     yaw_sd_dps: float = 25.0
     course_sd_deg: float = 15.0  # a moving track's direction against a chair's dead-reckoned one (0: off)
@@ -69,7 +71,8 @@ class IdentitySettings:
                   "encounter_keep": (0.0, 1.0), "share_m": (0.0, 100.0),
                   "speed_sd_mps": (1e-3, 10.0), "yaw_sd_dps": (1e-3, 1e3), "moving_sd": (1e-3, 10.0),
                   "position_sd_m": (1e-3, 100.0), "lag_prior_s": (-5.0, 5.0), "continue_height_m": (0.0, 10.0),
-                  "stature_weight": (0.0, 100.0), "seated_tilt_deg": (0.0, 90.0), "course_sd_deg": (0.0, 180.0),
+                  "stature_weight": (0.0, 100.0), "gait_weight": (0.0, 100.0), "seated_tilt_deg": (0.0, 90.0),
+                  "course_sd_deg": (0.0, 180.0),
                   "course_min_mps": (0.0, 10.0), "course_prior_bins": (0.0, 1e4), "course_forget_per_s": (0.01, 1.0)}
         for name, (low, high) in checks.items():
             value = getattr(self, name)

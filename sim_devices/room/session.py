@@ -32,7 +32,7 @@ from sim_devices.common import Item, write_merged
 from sim_devices.room.calibration import SpeedAccelFit, Track, fit
 from sim_devices.room.imu import WaistImu, waist_imu
 from sim_devices.room.params import RoomParams, check, extra_count
-from sim_devices.room.person import MAX_HEIGHT_M, MIN_HEIGHT_M
+from sim_devices.room.person import MAX_HEIGHT_M, MIN_HEIGHT_M, bounce_m, step_frequency_hz
 from sim_devices.room.walk import Motion, simulate_walk
 
 VENUE = "room"
@@ -154,7 +154,8 @@ def _wearer_paths(motion: Motion, params: RoomParams) -> list[PersonPath]:
 def _extras(people: int, motion: Motion, params: RoomParams, tracker: TrackerParams,
             rng: np.random.Generator) -> list[PersonPath]:
     """People without sensors, walking like the tracker preset's bystanders at the wearers' room speeds,
-    with statures drawn like the wearers'."""
+    with statures drawn like the wearers', and heads that bob with their steps as the wearers' do (the
+    camera sees every walker's gait, not only the wearers')."""
     count = extra_count(people, params.extra)
     if count == 0:
         return []
@@ -168,7 +169,27 @@ def _extras(people: int, motion: Motion, params: RoomParams, tracker: TrackerPar
         mean = params.people.female_height_m if female else params.people.male_height_m
         height = float(np.clip(rng.normal(mean, params.people.height_sd_m), MIN_HEIGHT_M, MAX_HEIGHT_M))
         out.append(dataclasses.replace(path, height_m=height))
-    return out
+    return [dataclasses.replace(path, head_m=path.height_m + _head_bob(path, params, rng)) for path in out]
+
+
+def _head_bob(path: PersonPath, params: RoomParams, rng: np.random.Generator) -> np.ndarray:
+    """A bystander's vertical head excursion (m) along its path: the wearers' gait model (sim_devices/room/gait.py:
+    cadence from the walk ratio, the inverted pendulum's bounce for that step, the person's bounce factor,
+    step time jitter) at the path's own speed; none while it stands."""
+    gait = params.gait
+    walk_ratio = float(np.clip(gait.walk_ratio_m_per_spm * path.height_m / 1.65 + rng.normal(0.0, gait.walk_ratio_sd),
+                               0.6 * gait.walk_ratio_m_per_spm, 1.4 * gait.walk_ratio_m_per_spm))
+    bounce_factor = float(math.exp(rng.normal(0.0, gait.bounce_person_sd)))
+    start_phase = float(rng.uniform(0.0, 2.0 * math.pi))
+    rate = 1e9 / float(np.median(np.diff(path.time_ns))) if len(path.time_ns) > 1 else 1.0
+    speed = np.hypot(np.gradient(path.x_m, 1.0 / rate), np.gradient(path.y_m, 1.0 / rate)) if len(path.x_m) > 1 \
+        else np.zeros(len(path.x_m))
+    jitter = 1.0 + gait.step_time_cv * rng.normal(0.0, 1.0, len(speed))
+    frequency = np.clip(step_frequency_hz(speed, walk_ratio, 1.0, params) * jitter, gait.min_step_frequency_hz,
+                        gait.max_step_frequency_hz)
+    phase = start_phase + 2.0 * math.pi * np.cumsum(frequency) / rate
+    bounce = bounce_m(speed / frequency, params.people.leg_length_ratio * path.height_m, params) * bounce_factor
+    return -0.5 * bounce * (np.cos(phase) + 0.25 * gait.second_harmonic * np.cos(2.0 * phase))
 
 
 def _describe(motion: Motion, imus: list[WaistImu], extras: list[PersonPath], params: RoomParams,

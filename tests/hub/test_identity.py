@@ -486,3 +486,89 @@ def test_the_hubs_pose_of_a_chair_grows_doubtful_while_its_poses_have_not_arrive
     stale = hub._pose_of("a", int(3.96 * S))  # 2 s after its newest pose
     assert fresh[1] < 1.0 and np.allclose(stale[0], [1.0 + 1.96, 1.0], atol=0.05)
     assert stale[1] == pytest.approx(np.hypot(fresh[1], 2.0 * STALE_MPS), rel=0.05)
+
+
+def _gait_scene(settings: IdentitySettings) -> list:
+    """a and b stand, then from 10 s walk side by side at one speed and one height, a quarter of a step
+    apart in phase; c walks alone from the start, so the engine holds c's track from its other cues
+    and learns the lag from it while a and b stand."""
+    paths = {"a": waypoints_path([(0, 0.5, 1.0), (10, 0.5, 1.0), (30, 20.5, 1.0)]),
+             "b": waypoints_path([(0, 0.5, 2.0), (10, 0.5, 2.0), (30, 20.5, 2.0)]),
+             "c": waypoints_path([(0, 0.5, 6.0), (30, 30.5, 6.0)])}
+    phases = {"a": 0.0, "b": np.pi / 2, "c": 1.0}
+    tracks = [(1, "a", 0, 30), (2, "b", 0, 30), (3, "c", 0, 30)]
+    rng = np.random.default_rng(3)
+    events = [e for p in paths for e in imu_batches(p, *paths[p], rng, phase_rad=phases[p])]
+    events += camera_frames(paths, tracks, rng, end_s=30, heights={p: 1.70 for p in paths}, bob_m=0.03, phases=phases,
+                            height_noise_m=0.03)
+    events.sort(key=lambda e: e[0])
+    engine = IdentityEngine(session(list(paths)), settings)
+    return [(o.timestamp_ns / S, o.agent_id, o.track_id) for _, m in events for o in engine.on_message(m)
+            if o.DESCRIPTOR.name == "TrackIdentity"], engine
+
+
+def test_two_walkers_alike_in_all_but_their_step_timing_are_told_apart_by_the_heads_bob():
+    """Same speed, course, turn rate and stature: only the steps' phase differs, which the camera sees as the
+    head's bob. With the gait cue both are named right once it has learnt the lag from c; without it the
+    engine cannot tell a from b."""
+    changes, engine = _gait_scene(IdentitySettings())
+    assert engine.gait.calibrated and engine.gait.reference > 0.2
+    assert holder_at(changes, "c", 10.0) == 3
+    assert all(holder_at(changes, "a", t) == 1 and holder_at(changes, "b", t) == 2 for t in (20.0, 25.0, 29.5))
+    blind, _ = _gait_scene(IdentitySettings(gait_weight=0.0))
+    assert not all(holder_at(blind, "a", t) == 1 and holder_at(blind, "b", t) == 2 for t in (20.0, 25.0, 29.5))
+
+
+def test_the_waists_vertical_acceleration_per_bin_is_the_mean_of_its_samples_across_batches():
+    """A bin that two batches share gets the mean of all its samples, not of the last batch's part."""
+    from hub.identity.cues import BIN_NS, AgentCues
+
+    cues = AgentCues("a", "a-waist", 100.0)
+    times = np.arange(0, 60) * 10_000_000 + 5 * BIN_NS  # 0.6 s at 100 Hz from bin 5
+    vertical = np.sin(np.arange(60) * 0.7) * 0.2
+    accel = np.column_stack([np.zeros(60), np.zeros(60), 1.0 + vertical])  # upright: vertical is z - 1 g
+    cues.push_imu(times[:15], accel[:15], np.zeros((15, 3)))  # the batch ends inside bin 6
+    cues.push_imu(times[15:], accel[15:], np.zeros((45, 3)))
+    got = cues.ring.window("vertical", 5, 6)
+    # the gravity low-pass starts at the first sample and barely moves in 0.6 s: vertical ~ z - |gravity|
+    expected = [vertical[k * 10:(k + 1) * 10].mean() for k in range(6)]
+    assert np.allclose(got, expected, atol=0.01)
+
+
+def test_gait_phase_learns_the_lag_from_held_pairs_and_ranks_the_one_in_step_first():
+    """Three walkers at one cadence, a third of a cycle apart; a track shows the first one's head bob two
+    bins late under noise. Uncalibrated the cue says nothing; once held pairs have taught it the lag,
+    the walker in step costs least; a standing agent and a short track are handled as documented."""
+    from hub.identity.gait import LAGS, PAD_BINS, WINDOW_BINS, GaitPhase
+
+    rng = np.random.default_rng(5)
+    read = WINDOW_BINS + PAD_BINS
+    span = int(LAGS.max() - LAGS.min())
+    gait = GaitPhase(weight=4.0)
+    first = None
+    for hop in range(40):
+        t = (hop * 2 + np.arange(-int(LAGS.max()), read + span - int(LAGS.max()))) * 0.1  # the agents' bins
+        phases = np.array([0.0, 2.1, 4.2])[:, None]
+        vertical = 0.1 * np.sin(2 * np.pi * 1.8 * t[None, :] + phases) + rng.normal(0, 0.01, (3, len(t)))
+        activity = np.full((3, len(t)), 0.15)
+        activity[2] = 0.02  # the third stands (its vertical is not a walk's)
+        track_t = (hop * 2 + np.arange(read)) * 0.1
+        # the head is highest when the waist's acceleration is most negative; seen two bins late
+        heights = np.vstack([1.7 - 0.03 * np.sin(2 * np.pi * 1.8 * (track_t - 0.2) + phases[0]),
+                             1.7 - 0.03 * np.sin(2 * np.pi * 1.8 * (track_t - 0.2) + phases[1])])
+        heights = heights + rng.normal(0, 0.01, heights.shape)
+        heights[1, :-14] = np.nan  # the second track is new: 1.4 s of it
+        correlations = gait.correlations(heights, vertical, activity)
+        if first is None:
+            first = gait.cost(correlations)
+        gait.learn(correlations, [(0, 0)])
+    assert np.isnan(first).all()  # nothing learnt yet: no vote
+    assert gait.calibrated and gait.lag == 2
+    cost = gait.cost(correlations)
+    assert cost[0, 0] < 0.5 * gait.weight * gait.reference  # in step: about 0
+    assert cost[0, 1] > cost[0, 0] + 1.0
+    assert np.isnan(cost[:, 2]).all()  # a standing agent is not compared
+    assert gait.bins[0] == WINDOW_BINS and gait.bins[1] == 12  # the short track over its longest window
+    assert np.argmin(cost[1, :2]) == 1  # ... and still finds its walker
+    correlation = correlations[1, :2, int(np.flatnonzero(LAGS == 2)[0])]
+    assert np.allclose(cost[1, :2], gait.weight * (gait.reference - correlation) * 12 / WINDOW_BINS)  # weighing less

@@ -327,3 +327,23 @@ def test_every_figure_is_documented():
     for key, _, _, source in describe():
         assert f"`{key}`" in text, key
         assert source, key
+
+
+def test_bystanders_heads_bob_with_their_steps_as_the_wearers_do():
+    """The camera sees every walker's gait: a bystander walking at 1.2 m/s bobs a few centimetres at a
+    cadence inside the gait model's bounds; standing, not at all."""
+    from sim_devices.camera import PersonPath
+    from sim_devices.room.params import RoomParams
+    from sim_devices.room.session import _head_bob
+
+    params = RoomParams()
+    rate = 50.0
+    t = np.arange(0, 20, 1 / rate)
+    x = np.where(t < 10, 1.2 * t, 12.0)  # walks 10 s, then stands
+    path = PersonPath("extra1", (t * 1e9).astype(np.int64), x, np.zeros_like(t), height_m=1.7)
+    bob = _head_bob(path, params, np.random.default_rng(1))
+    walking, standing = bob[(t > 1) & (t < 9)], bob[t > 11]
+    assert 0.01 < np.ptp(walking) < 0.08 and np.ptp(standing) < 1e-9
+    spectrum = np.abs(np.fft.rfft(walking - walking.mean()))
+    peak_hz = np.fft.rfftfreq(len(walking), 1 / rate)[np.argmax(spectrum)]
+    assert params.gait.min_step_frequency_hz <= peak_hz <= params.gait.max_step_frequency_hz

@@ -1,8 +1,9 @@
 """Crafted scenes for the identity tests: people on given paths, their waist IMUs, a camera's tracks.
 
 The IMU is the minimum the cues need, built from the path: gravity on z plus a vertical gait
-oscillation at 2 Hz whose amplitude grows with speed (the camera-identity paper's relation), and
-the turn rate on the gyro's z. Tracks follow the paths with noise; which person a track follows
+oscillation at 1.9 Hz whose amplitude grows with speed (the camera-identity paper's relation), and
+the turn rate on the gyro's z. Each person's steps start at their own phase (`phases`), and a camera
+that reports head heights sees the head bob with them (`bob_m`). Tracks follow the paths with noise; which person a track follows
 over time is given explicitly, so a scene can switch, merge or invent tracks.
 """
 
@@ -59,14 +60,21 @@ def waypoints_path(points: list[tuple[float, float, float]], rate_hz: float = IM
     return times, smooth
 
 
-def imu_batches(agent_id: str, times: np.ndarray, xy: np.ndarray, rng: np.random.Generator,
-                gait_g_per_mps: float = 0.18, clock_offset_s: float = 0.0, chairs: bool = False) -> list[tuple[int, object]]:
-    """(arrival_ns, ImuBatch) every 0.2 s for a waist sensor on this path."""
+def gait_phase(times: np.ndarray, xy: np.ndarray, start_rad: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """(speed m/s, step phase rad) along a path: the phase advances at 1.9 Hz while walking."""
     velocity = np.gradient(xy, times, axis=0)
     speed = np.hypot(velocity[:, 0], velocity[:, 1])
+    return speed, start_rad + 2 * np.pi * np.cumsum(np.where(speed > 0.2, 1.9, 0.0)) / IMU_HZ
+
+
+def imu_batches(agent_id: str, times: np.ndarray, xy: np.ndarray, rng: np.random.Generator,
+                gait_g_per_mps: float = 0.18, clock_offset_s: float = 0.0, chairs: bool = False,
+                phase_rad: float = 0.0) -> list[tuple[int, object]]:
+    """(arrival_ns, ImuBatch) every 0.2 s for a waist sensor on this path, its steps from `phase_rad`."""
+    velocity = np.gradient(xy, times, axis=0)
+    speed, phase = gait_phase(times, xy, phase_rad)
     heading = np.unwrap(np.arctan2(velocity[:, 1], velocity[:, 0]))
     turn_dps = np.degrees(np.gradient(heading, times)) * (speed > 0.2)
-    phase = 2 * np.pi * np.cumsum(np.where(speed > 0.2, 1.9, 0.0)) / IMU_HZ
     accel = np.zeros((len(times), 3))
     accel[:, 2] = 1.0 + gait_g_per_mps * speed * np.sin(phase) + rng.normal(0, 0.01, len(times))
     accel[:, 0] = 0.05 * speed * np.sin(phase / 2) + rng.normal(0, 0.01, len(times))
@@ -87,10 +95,15 @@ def imu_batches(agent_id: str, times: np.ndarray, xy: np.ndarray, rng: np.random
 def camera_frames(paths: dict[str, tuple[np.ndarray, np.ndarray]], tracks: list[tuple[int, str, float, float]],
                   rng: np.random.Generator, noise_m: float = 0.05, end_s: float | None = None,
                   camera: str = "cam1", heights: dict[str, float] | None = None,
-                  height_noise_m: float = 0.03) -> list[tuple[int, object]]:
+                  height_noise_m: float = 0.03, bob_m: float = 0.0,
+                  phases: dict[str, float] | None = None) -> list[tuple[int, object]]:
     """(arrival_ns, CameraFrame) at FPS. `tracks`: (track id, person or "a+b" merge or "" false, start s, end s).
     With `heights` (person -> head height, m) the frames report each track's height as a stereo tracker
-    does (a merge at its people's mean, a false track at 1.7 m), with `height_noise_m` per frame."""
+    does (a merge at its people's mean, a false track at 1.7 m), with `height_noise_m` per frame; the
+    head bobs `bob_m` with each person's steps (their `phases`, as imu_batches), down as the waist's
+    acceleration is up."""
+    bob = {p: (t_xy[0], *gait_phase(t_xy[0], t_xy[1], (phases or {}).get(p, 0.0))) for p, t_xy in paths.items()} \
+        if bob_m else {}
     end_s = end_s if end_s is not None else max(t[3] for t in tracks)
     out = []
     wander = {}
@@ -110,12 +123,20 @@ def camera_frames(paths: dict[str, tuple[np.ndarray, np.ndarray]], tracks: list[
             xs.append(float(position[0] + rng.normal(0, noise_m)))
             ys.append(float(position[1] + rng.normal(0, noise_m)))
             if heights is not None:
-                tall = np.mean([heights[p] for p in who.split("+")]) if who else 1.7
+                tall = np.mean([heights[p] + _bob_at(bob, p, t, bob_m) for p in who.split("+")]) if who else 1.7
                 hs.append(float(tall + rng.normal(0, height_noise_m)))
         frame = messages.new("CameraFrame", timestamp_ns=int(t * S), camera_id=camera, frame=k + 1, track_id=ids,
                              x_m=xs, y_m=ys, position_sd_m=noise_m, height_m=hs)
         out.append((int(t * S) + 30_000_000, frame))
     return out
+
+
+def _bob_at(bob: dict, person: str, t: float, bob_m: float) -> float:
+    if person not in bob:
+        return 0.0
+    times, speed, phase = bob[person]
+    k = min(int(np.searchsorted(times, t)), len(speed) - 1)
+    return -bob_m * min(float(speed[k]), 1.5) / 1.5 * float(np.sin(phase[k]))
 
 
 def write_scene(path, paths: dict[str, tuple[np.ndarray, np.ndarray]], tracks: list[tuple[int, str, float, float]],
