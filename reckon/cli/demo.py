@@ -34,7 +34,7 @@ def run_demo(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
           f"corrections {', '.join(f'{k} {v}' for k, v in sorted(corrections.items())) or 'none'}")
     print()
     eval_args = argparse.Namespace(session=[game], json=False, plots=out / "plots", identity_scaling=False,
-                                   worlds=None)
+                                   worlds=None, room_worlds=None)
     return run_eval(eval_args, progress)
 
 

@@ -19,6 +19,10 @@ def run_eval(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
     from reckon.evaluation.report import to_json, to_table
     from reckon.evaluation.swim_eval import evaluate_swim, is_swim_session
 
+    if args.room_worlds is not None:
+        if args.session or args.worlds is not None:
+            raise ReckonError("reckon eval: give session logs, --worlds or --room-worlds, one of them")
+        return _run_room_worlds(args, progress)
     if args.worlds is not None:
         if args.session:
             raise ReckonError("reckon eval: give session logs or --worlds, not both")
@@ -71,6 +75,8 @@ def _run_worlds(args: argparse.Namespace, progress: Callable[[str], None]) -> in
     from sim_devices.wheelchair.worlds import parse_worlds
 
     worlds = parse_worlds(args.worlds)
+    if args.duration is None:
+        args.duration = 317.0  # the paper's game length in the chair simulator
     command = (f"reckon eval --worlds {args.worlds} --seed {args.seed} --players {args.players} "
                f"--duration {args.duration:g}")
     progress(f"{len(worlds)} worlds, {args.players} chairs for {args.duration:g} s each")
@@ -81,6 +87,23 @@ def _run_worlds(args: argparse.Namespace, progress: Callable[[str], None]) -> in
     return 0
 
 
+def _run_room_worlds(args: argparse.Namespace, progress: Callable[[str], None]) -> int:
+    from reckon.evaluation import room_worlds_eval
+    from sim_devices.room.session import PAPER_DURATION_S
+    from sim_devices.wheelchair.worlds import parse_worlds
+
+    worlds = parse_worlds(args.room_worlds)
+    duration = args.duration if args.duration is not None else PAPER_DURATION_S
+    command = (f"reckon eval --room-worlds {args.room_worlds} --seed {args.seed} --people {args.people} "
+               f"--duration {duration:g}")
+    progress(f"{len(worlds)} room worlds, {args.people} wearers for {duration:g} s each")
+    results = room_worlds_eval.evaluate_room_worlds(worlds, args.seed, args.people, duration, args.jobs, progress)
+    summary = room_worlds_eval.summarise(results)
+    print(json.dumps({"command": command, **summary}, indent=1) if args.json
+          else room_worlds_eval.to_table(summary, command))
+    return 0
+
+
 def register(sub: Any) -> None:
     ev = sub.add_parser("eval", help="run the estimators over a session and score them against truth")
     ev.add_argument("session", nargs="*", help="a session log; pedestrian walks: several, pooled")
@@ -88,7 +111,11 @@ def register(sub: Any) -> None:
                     "worlds A..B (docs/simulator-worlds.md) and report the spread over worlds")
     ev.add_argument("--seed", type=int, default=1, help="with --worlds: the game's motion seed")
     ev.add_argument("--players", type=int, default=10, help="with --worlds: chairs per game")
-    ev.add_argument("--duration", type=float, default=317.0, help="with --worlds: seconds per game")
+    ev.add_argument("--room-worlds", metavar="A-B", help="instead of a log: simulate the camera-identity room in "
+                    "each of room worlds A..B (docs/simulator-room.md) and report the spread of time correct")
+    ev.add_argument("--people", type=int, default=3, help="with --room-worlds: wearers per room")
+    ev.add_argument("--duration", type=float, help="with --worlds or --room-worlds: seconds per game (317) or "
+                    "room (297)")
     ev.add_argument("--jobs", type=int, help="with --worlds: worker processes (default: one per core)")
     ev.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     ev.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR")

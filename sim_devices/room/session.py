@@ -83,9 +83,11 @@ class RoomSummary:
 def simulate_room(output: Path, seed: int = 1, people: int = 3, duration_s: float = PAPER_DURATION_S,
                   params: RoomParams | None = None, camera: bool = True,
                   progress: Callable[[float], None] | None = None, *,
-                  tracker: TrackerParams | None = None) -> RoomSummary:
+                  tracker: TrackerParams | None = None, world: int = 0) -> RoomSummary:
     """Simulate people with waist sensors in the paper's room (grown for more people) and write the
     session log to `output`; `camera` adds the simulated tracker's frames (preset ROOM, or `tracker`).
+    `world` only labels the session (source "world", when not 0): a room world's figures are already in
+    `params` and `tracker` (sim_devices.room.worlds.room_world).
 
     ConfigError for a bad people count, duration or seed, inconsistent params, or an unwritable output.
     `progress`, if given, is called with the completed share in [0, 1].
@@ -108,7 +110,7 @@ def simulate_room(output: Path, seed: int = 1, people: int = 3, duration_s: floa
         recording = simulate_tracks(_wearer_paths(motion, params) + extras, motion.room_m, tracker,
                                     np.random.default_rng(camera_seed), CAMERA_ID)
     report(MOTION_SHARE + CAMERA_SHARE)
-    session = _describe(motion, imus, extras, params, tracker if camera else None, seed, duration_s)
+    session = _describe(motion, imus, extras, params, tracker if camera else None, seed, duration_s, world)
     counts = {"imu_samples_written": 0, "imu_batches_written": 0, "lost_batches": 0}
     link_rng = np.random.default_rng(link_seed)
     sources: list[Iterator[Item]] = [_imu_items(imu, motion, params, link_rng, counts) for imu in imus]
@@ -193,7 +195,7 @@ def _head_bob(path: PersonPath, params: RoomParams, rng: np.random.Generator) ->
 
 
 def _describe(motion: Motion, imus: list[WaistImu], extras: list[PersonPath], params: RoomParams,
-              tracker: TrackerParams | None, seed: int, duration_s: float) -> Session:
+              tracker: TrackerParams | None, seed: int, duration_s: float, world: int = 0) -> Session:
     length, width = motion.room_m
     agents = []
     for person, body, imu in zip(motion.persons, motion.bodies, imus):
@@ -215,6 +217,8 @@ def _describe(motion: Motion, imus: list[WaistImu], extras: list[PersonPath], pa
                   "extras": {e.person_id: {"height_m": e.height_m} for e in extras}}}
     if tracker is not None:
         source["tracker"] = {"camera_id": CAMERA_ID, "params": dataclasses.asdict(tracker)}
+    if world:
+        source["world"] = world
     return Session(Venue(VENUE, length, width), tuple(agents), source)
 
 
