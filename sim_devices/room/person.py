@@ -41,14 +41,20 @@ def draw_person(person_id: str, params: RoomParams, rng: np.random.Generator) ->
     mean = people.female_height_m if female else people.male_height_m
     height = float(np.clip(rng.normal(mean, people.height_sd_m), MIN_HEIGHT_M, MAX_HEIGHT_M))
     speed_factor = float(np.clip(rng.normal(1.0, people.speed_factor_sd), *SPEED_FACTOR_LIMITS))
-    # walk ratio follows stature a little (taller people take longer steps at one cadence)
-    walk_ratio = gait.walk_ratio_m_per_spm * height / 1.65 + rng.normal(0.0, gait.walk_ratio_sd)
-    walk_ratio = float(np.clip(walk_ratio, 0.6 * gait.walk_ratio_m_per_spm, 1.4 * gait.walk_ratio_m_per_spm))
+    walk_ratio = draw_walk_ratio(height, params, rng)
     bounce = float(math.exp(rng.normal(0.0, gait.bounce_person_sd)))
     sway = float(math.exp(rng.normal(0.0, 0.2)))  # assumption: +-20 % between people, like the bounce
     heel = float(math.exp(rng.normal(0.0, 0.3)))  # assumption: heel strikes differ more (footwear, style)
     return Person(person_id, female, height, people.leg_length_ratio * height, people.sensor_height_ratio * height,
                   speed_factor, walk_ratio, bounce, sway, heel)
+
+
+def draw_walk_ratio(height_m: float, params: RoomParams, rng: np.random.Generator) -> float:
+    """A person's walk ratio (m per step/min): it follows stature a little (taller people take longer
+    steps at one cadence), spread by walk_ratio_sd, clipped to +-40 % of the figure."""
+    gait = params.gait
+    walk_ratio = gait.walk_ratio_m_per_spm * height_m / 1.65 + rng.normal(0.0, gait.walk_ratio_sd)
+    return float(np.clip(walk_ratio, 0.6 * gait.walk_ratio_m_per_spm, 1.4 * gait.walk_ratio_m_per_spm))
 
 
 def step_frequency_hz(speed_mps: np.ndarray, walk_ratio_m_per_spm: np.ndarray | float, step_ratio: np.ndarray | float,

@@ -32,7 +32,7 @@ from sim_devices.common import Item, write_merged
 from sim_devices.room.calibration import SpeedAccelFit, Track, fit
 from sim_devices.room.imu import WaistImu, waist_imu
 from sim_devices.room.params import RoomParams, check, extra_count
-from sim_devices.room.person import MAX_HEIGHT_M, MIN_HEIGHT_M, bounce_m, step_frequency_hz
+from sim_devices.room.person import MAX_HEIGHT_M, MIN_HEIGHT_M, bounce_m, draw_walk_ratio, step_frequency_hz
 from sim_devices.room.walk import Motion, simulate_walk
 
 VENUE = "room"
@@ -179,8 +179,7 @@ def _head_bob(path: PersonPath, params: RoomParams, rng: np.random.Generator) ->
     cadence from the walk ratio, the inverted pendulum's bounce for that step, the person's bounce factor,
     step time jitter) at the path's own speed; none while it stands."""
     gait = params.gait
-    walk_ratio = float(np.clip(gait.walk_ratio_m_per_spm * path.height_m / 1.65 + rng.normal(0.0, gait.walk_ratio_sd),
-                               0.6 * gait.walk_ratio_m_per_spm, 1.4 * gait.walk_ratio_m_per_spm))
+    walk_ratio = draw_walk_ratio(path.height_m, params, rng)
     bounce_factor = float(math.exp(rng.normal(0.0, gait.bounce_person_sd)))
     start_phase = float(rng.uniform(0.0, 2.0 * math.pi))
     rate = 1e9 / float(np.median(np.diff(path.time_ns))) if len(path.time_ns) > 1 else 1.0
