@@ -3,15 +3,12 @@
 Each room world (sim_devices.room.worlds) is simulated with the same motion seed and scored by the
 identity evaluation (reckon/evaluation/identity_eval.py: ours live and refined, the ceiling, the
 paper's method); its log is deleted once scored. Worlds run in worker processes, one per core by
-default. The report: per method, the median, p10 and worst world's time correct, and in how many
+default (reckon/evaluation/worlds_eval.py `in_workers`, as for chairs). The report: per method, the median, p10 and worst world's time correct, and in how many
 worlds ours live is above the paper's method.
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -57,20 +54,9 @@ def run_room_world(world: int, seed: int, people: int, duration_s: float, workdi
 def evaluate_room_worlds(worlds: list[int], seed: int, people: int, duration_s: float, jobs: int | None = None,
                          progress: Callable[[str], None] = lambda _: None) -> list[RoomWorldResult]:
     """Every world's scores, in world order; `jobs` worker processes (default: one per core; 1: in this one)."""
-    jobs = max(1, min(jobs or os.cpu_count() or 1, len(worlds)))
-    results: list[RoomWorldResult] = []
-    with tempfile.TemporaryDirectory(prefix="reckon-rooms-") as workdir:
-        if jobs == 1:
-            for world in worlds:
-                results.append(run_room_world(world, seed, people, duration_s, workdir))
-                progress(_done(results[-1], len(results), len(worlds)))
-        else:
-            with ProcessPoolExecutor(max_workers=jobs) as pool:
-                futures = [pool.submit(run_room_world, w, seed, people, duration_s, workdir) for w in worlds]
-                for future in as_completed(futures):
-                    results.append(future.result())
-                    progress(_done(results[-1], len(results), len(worlds)))
-    return sorted(results, key=lambda r: r.world)
+    from reckon.evaluation.worlds_eval import in_workers
+
+    return in_workers(run_room_world, worlds, (seed, people, duration_s), jobs, progress, _done)
 
 
 def _done(result: RoomWorldResult, count: int, total: int) -> str:

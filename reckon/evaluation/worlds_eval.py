@@ -76,19 +76,27 @@ def evaluate_worlds(worlds: list[int], seed: int, players: int, duration_s: floa
                     progress: Callable[[str], None] = lambda _: None) -> list[WorldResult]:
     """Every world's scores, in world order; `jobs` worker processes (default: one per core, at most
     one per world; 1 runs in this process)."""
+    return in_workers(run_world, worlds, (seed, players, duration_s), jobs, progress, _done)
+
+
+def in_workers(run: Callable[..., Any], worlds: list[int], args: tuple, jobs: int | None,
+               progress: Callable[[str], None], done: Callable[[Any, int, int], str]) -> list[Any]:
+    """`run(world, *args, workdir)` for every world, in `jobs` worker processes (default: one per core,
+    at most one per world; 1: in this process), each log in one scratch folder; the results in world
+    order (each has `.world`), `done(result, count, total)` reported as each comes in."""
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(worlds)))
-    results: list[WorldResult] = []
+    results: list[Any] = []
     with tempfile.TemporaryDirectory(prefix="reckon-worlds-") as workdir:
         if jobs == 1:
             for world in worlds:
-                results.append(run_world(world, seed, players, duration_s, workdir))
-                progress(_done(results[-1], len(results), len(worlds)))
+                results.append(run(world, *args, workdir))
+                progress(done(results[-1], len(results), len(worlds)))
         else:
             with ProcessPoolExecutor(max_workers=jobs) as pool:
-                futures = [pool.submit(run_world, w, seed, players, duration_s, workdir) for w in worlds]
+                futures = [pool.submit(run, w, *args, workdir) for w in worlds]
                 for future in as_completed(futures):
                     results.append(future.result())
-                    progress(_done(results[-1], len(results), len(worlds)))
+                    progress(done(results[-1], len(results), len(worlds)))
     return sorted(results, key=lambda r: r.world)
 
 
