@@ -4,7 +4,8 @@ Pure functions over `edge.chair.estimator.ChairState`; the hub (or `reckon eval`
 - A beacon is a closest approach, not a range: RSSI ranging is poor (path-loss exponent 1.8-4.3
   in one building, body loss 3-5 dB; algorithms.md), and the venue file's figures may be wrong. A
   pass that peaks near the beacon's learned level gives one fix at the moment of its strongest
-  sighting, as uncertain as that beacon's fixes have turned out to be (`BeaconLevels`).
+  sighting: where that beacon's close passes have put chairs, or, when the pose says the pass was
+  more likely a far one, where its far passes have (`BeaconLevels`).
 - A contact says the two chairs were about a chair-width apart (centres ~0.9 m), not on one
   point as the paper's eq. 8 has it: a range constraint on both, chi-square gated.
 """
@@ -33,7 +34,9 @@ ACCEPT_DB = 3.0  # a pass peaking this close to the level was a close one
 FIX_PRIOR_SD_M = 1.5  # a close pass's distance from the beacon, until the beacon's own are learned
 FIX_PRIOR_WEIGHT = 3.0  # the prior counts as this many fixes
 FIX_MEMORY = 30.0  # fixes: forgetting of the learned spread
-FIX_CLIP_M = 8.0  # a fix's innovation counts for the spread up to this
+FAR_PRIOR_SD_M = 5.0  # a candidate that was not close: somewhere in the beacon's end of the court
+CLOSE_PRIOR_SHARE = 0.5  # of a beacon's candidate passes, the share that were close, until its own are counted
+CLOSE_PRIOR_WEIGHT = 5.0  # the prior counts as this many candidates
 CONTACT_DISTANCE_M = 0.9  # two chair discs of ~0.45 m radius touching, until the venue's contacts teach it
 CONTACT_SD_M = 0.3  # centres 0.6-1.2 m apart in frontal and lateral contacts
 CONTACT_FLOOR_SD_M = 0.1  # never trusted closer than this (chairs meet at any angle)
@@ -49,31 +52,66 @@ def free_space_level_dbm(beacon: Beacon, horizontal_m: float) -> float:
 
 
 @dataclass
+class _Component:
+    """One kind of candidate pass, learned by EM with forgetting: where the chair was against the beacon
+    (mean offset) and how widely (per axis, beyond the poses' own variance), blended with a prior."""
+
+    prior_sd_m: float
+    offset_sum_m: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    spread_sum_m2: float = 0.0
+    weight: float = 0.0
+
+    def offset_m(self) -> np.ndarray:
+        return self.offset_sum_m / (self.weight + FIX_PRIOR_WEIGHT)
+
+    def variance_m2(self) -> float:
+        return (self.spread_sum_m2 + FIX_PRIOR_WEIGHT * self.prior_sd_m**2) / (self.weight + FIX_PRIOR_WEIGHT)
+
+    def learn(self, responsibility: float, from_beacon: np.ndarray, pose_covariance: np.ndarray) -> None:
+        forget = 1.0 - 1.0 / FIX_MEMORY
+        deviation = from_beacon - self.offset_m()
+        self.offset_sum_m = forget * self.offset_sum_m + responsibility * from_beacon
+        self.spread_sum_m2 = forget * self.spread_sum_m2 + responsibility * 0.5 * (
+            float(deviation @ deviation) - float(np.trace(pose_covariance)))
+        self.weight = forget * self.weight + responsibility
+
+
+@dataclass
 class BeaconLevel:
     """What the hub has learned of one beacon from every chair's passes (fixed size)."""
 
     peaks: deque = field(default_factory=lambda: deque(maxlen=LEVEL_PASSES))
-    spread_sum_m2: float = 0.0  # squared fix innovations beyond the poses' own variance, with forgetting
-    spread_weight: float = 0.0
-    taken: int = 0
-    refused: int = 0
+    close: _Component = field(default_factory=lambda: _Component(FIX_PRIOR_SD_M))
+    far: _Component = field(default_factory=lambda: _Component(FAR_PRIOR_SD_M))
+    close_sum: float = 0.0  # responsibilities of every candidate pass, with forgetting
+    close_weight: float = 0.0  # ... candidate passes counted
+    close_fixes: int = 0
+    far_fixes: int = 0
 
 
 class BeaconLevels:
-    """Close passes of the venue's beacons: the venue file's figures, checked by what each beacon shows.
+    """Passes of the venue's beacons: the venue file's figures, checked by what each beacon shows.
 
     RSSI is a poor range, and the venue file's tx power and height may both be wrong (a beacon on
     the floor instead of hung, 6 dB off its label). A pass's peak is the moment of closest
-    approach; how close, two things say:
+    approach; whether it was close, two things say:
     - the venue file: the peak's distance h through its tx power and height in free space; a pass
-      with h <= BEACON_MAX_HORIZONTAL_M is close, with sigma sqrt(h^2 + BEACON_BASE_SD_M^2);
+      with h <= BEACON_MAX_HORIZONTAL_M is a candidate, with sigma sqrt(h^2 + BEACON_BASE_SD_M^2);
     - the beacon itself: its level, the second strongest of its last LEVEL_PASSES pass peaks over
       all chairs (the strongest alone would follow one lucky fade; most passes are not close, so
-      a median would learn what far looks like); a pass peaking within ACCEPT_DB of it is close
-      too (a hall quieter than its file), and so is a sighting within PASS_DB of it part of a pass.
-    Either way the fix is never trusted more than the beacon's own fixes have earned: their
-    innovations' spread beyond the poses' stated variance, per beacon, refused fixes included,
-    blended with FIX_PRIOR_SD_M. A wrong venue file makes innovations large, and its beacon weak.
+      a median would learn what far looks like); a pass peaking within ACCEPT_DB of it is a
+      candidate too (a hall quieter than its file), and a sighting within PASS_DB of it is part of
+      a pass.
+    A candidate is still only probably close: with a low path-loss exponent and deep shadowing a
+    pass 15 m away peaks as high as one under the beacon. So each beacon learns two kinds of
+    candidate, by EM over every chair's (each candidate weighted by how likely it was of each kind,
+    with forgetting): close passes, where the chair was at a learned offset from the beacon (a
+    chair peaks in front of a goal, on the court side, not under it: 1-4 m in our worlds) within
+    the venue file's sigma or the spread they have shown, whichever is larger; and far ones, in the
+    beacon's end of the court (prior FAR_PRIOR_SD_M). A candidate's fix is the likelier kind's
+    point, its covariance divided by that kind's probability. A single wide Gaussian was not
+    robust: far passes widened the spread they were judged by until a fix 15 m off passed the gate,
+    and in a hall whose chairs peak 3 m in front of the goal every fix pulled them under it.
     """
 
     def __init__(self, beacons: tuple[Beacon, ...]) -> None:
@@ -91,8 +129,8 @@ class BeaconLevels:
         return min(PASS_FLOOR_DBM, self.level_dbm(beacon_id) - PASS_DB)
 
     def close(self, beacon_id: str, peak_dbm: float) -> np.ndarray | None:
-        """A pass ended at this peak: the covariance of its fix at the beacon if it was close, else None.
-        (The peak joins the beacon's record.)"""
+        """A pass ended at this peak: the covariance of its fix, were it close, if it is a candidate; else
+        None. (The peak joins the beacon's record.)"""
         beacon, level = self.beacons[beacon_id], self.level_dbm(beacon_id)
         self.levels[beacon_id].peaks.append(peak_dbm)
         slant = 10.0 ** ((beacon.tx_power_dbm - peak_dbm) / (10.0 * PATH_LOSS_EXPONENT))
@@ -100,28 +138,42 @@ class BeaconLevels:
         if horizontal > BEACON_MAX_HORIZONTAL_M and peak_dbm < level - ACCEPT_DB:
             return None
         stated = min(horizontal, BEACON_MAX_HORIZONTAL_M) ** 2 + BEACON_BASE_SD_M**2
-        return np.eye(2) * max(stated, self.learned_variance_m2(beacon_id))
+        return np.eye(2) * max(stated, self.levels[beacon_id].close.variance_m2())
 
-    def learned_variance_m2(self, beacon_id: str) -> float:
-        """Per axis, what this beacon's fixes have shown beyond the poses' variance (with the prior)."""
+    def close_share(self, beacon_id: str) -> float:
+        """Of this beacon's candidate passes, the share that were close (with the prior)."""
         record = self.levels[beacon_id]
-        return (record.spread_sum_m2 + FIX_PRIOR_WEIGHT * FIX_PRIOR_SD_M**2) / (record.spread_weight + FIX_PRIOR_WEIGHT)
+        return (record.close_sum + CLOSE_PRIOR_WEIGHT * CLOSE_PRIOR_SHARE) / (record.close_weight + CLOSE_PRIOR_WEIGHT)
 
-    def judged(self, beacon_id: str, shift: np.ndarray, pose_covariance: np.ndarray, taken: bool) -> None:
-        """The gate took or refused a fix of this beacon with this innovation against a pose of this covariance.
-
-        Refused fixes count too (learning from the taken ones alone would learn the gate's width,
-        and a beacon whose close passes are often far would keep its confidence); an innovation
-        counts for at most FIX_CLIP_M, so one blunder of the pose does not condemn the beacon."""
-        record = self.levels[beacon_id]
-        if taken:
-            record.taken += 1
+    def fix(self, beacon_id: str, pose_xy: np.ndarray, pose_covariance: np.ndarray,
+            close_covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """(point, covariance, close) of a candidate's fix for a pose at its peak; the beacon learns from it."""
+        record, beacon = self.levels[beacon_id], self.beacons[beacon_id]
+        from_beacon = pose_xy - np.array([beacon.x_m, beacon.y_m])
+        far_covariance = np.eye(2) * record.far.variance_m2()
+        share = self.close_share(beacon_id)
+        near = share * _density(from_beacon - record.close.offset_m(), pose_covariance + close_covariance)
+        far = (1.0 - share) * _density(from_beacon - record.far.offset_m(), pose_covariance + far_covariance)
+        responsibility = near / (near + far) if near + far > 0.0 else 0.0
+        point = np.array([beacon.x_m, beacon.y_m])
+        if responsibility >= 0.5:
+            point, covariance = point + record.close.offset_m(), close_covariance / responsibility
+            record.close_fixes += 1
         else:
-            record.refused += 1
+            point, covariance = point + record.far.offset_m(), far_covariance / (1.0 - responsibility)
+            record.far_fixes += 1
+        record.close.learn(responsibility, from_beacon, pose_covariance)
+        record.far.learn(1.0 - responsibility, from_beacon, pose_covariance)
         forget = 1.0 - 1.0 / FIX_MEMORY
-        beyond = 0.5 * (min(float(shift @ shift), FIX_CLIP_M**2) - float(np.trace(pose_covariance)))
-        record.spread_sum_m2 = forget * record.spread_sum_m2 + beyond
-        record.spread_weight = forget * record.spread_weight + 1.0
+        record.close_sum = forget * record.close_sum + responsibility
+        record.close_weight = forget * record.close_weight + 1.0
+        return point, covariance, responsibility >= 0.5
+
+
+def _density(deviation: np.ndarray, covariance: np.ndarray) -> float:
+    """The 2-D normal density of `deviation` under `covariance`."""
+    return math.exp(-0.5 * float(deviation @ np.linalg.solve(covariance, deviation))) / (
+        2.0 * math.pi * math.sqrt(float(np.linalg.det(covariance))))
 
 
 @dataclass

@@ -21,7 +21,8 @@ All times here are venue time: device timestamps plus each device's clock offset
   independent estimates). The pushes also say which way the other chair was (action and reaction
   point along the line between the centres), so the constraint holds across the line too, within
   `PUSH_LINE_SD` of its direction; without pushes it holds along the estimates' line only.
-- Beacons: one fix per close pass, at its strongest sighting, as trusted as its beacon has earned (hub/chair/corrections.py).
+- Beacons: one fix per candidate pass, at its strongest sighting: close or far, each where and as widely as its
+  beacon's passes of that kind have shown (hub/chair/corrections.py).
 - Fixes: an operator's or video position at a time, gated like a beacon fix.
 
 Honest covariance. An edge's covariance is its filter's, and after a run of video fixes it states
@@ -343,10 +344,10 @@ class ChairHub:
         while view.ended and view.ended[0][1].peak_ns <= view.latest_ns:
             beacon_id, ended = view.ended.popleft()
             covariance = self.beacon_levels.close(beacon_id, ended.peak_rssi)
-            if covariance is not None:
-                beacon = self.beacons[beacon_id]
-                out += self._absolute(view, ended.peak_ns, np.array([beacon.x_m, beacon.y_m]), covariance,
-                                      Kind.BEACON, beacon_id)
+            then = view.pose_bridged(ended.peak_ns) if covariance is not None else None
+            if then is not None:
+                point, covariance, _ = self.beacon_levels.fix(beacon_id, then[0], then[1], covariance)
+                out += self._absolute(view, ended.peak_ns, point, covariance, Kind.BEACON, beacon_id)
         while view.fixes and view.fixes[0][0] <= view.latest_ns:
             out += self._absolute(view, *view.fixes.popleft())
         return out
@@ -359,8 +360,6 @@ class ChairHub:
         shift = xy - then[0]
         spread = then[1] + covariance + (view.extra if kind in (Kind.VIDEO, Kind.MANUAL) else 0.0)
         taken = float(shift @ np.linalg.solve(spread, shift)) <= FIX_GATE_CHI2
-        if kind == Kind.BEACON:
-            self.beacon_levels.judged(source, shift, then[1], taken)
         if not taken:
             if kind != Kind.VIDEO or not self._relock(view, time_ns, shift, covariance, source):
                 self.counters.gated_out += 1

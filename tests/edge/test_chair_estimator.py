@@ -10,7 +10,7 @@ import pytest
 
 from edge.chair.estimator import (BIAS, GYRO_SCALE, HEADING, X, Y, ChairSample, ChairSettings, Flag, position_update, start,
                                   step, wheel_turn_ratio_prior)
-from hub.chair.corrections import FIX_CLIP_M, BeaconLevels, ContactDistance, contact_update
+from hub.chair.corrections import BeaconLevels, ContactDistance, contact_update
 from protocol.session import Beacon
 
 SETTINGS = ChairSettings(wheel_diameter_m=0.6)
@@ -273,16 +273,32 @@ def test_beacon_fixes_follow_the_venue_file_and_what_the_beacon_has_shown():
         quiet.close("goal", peak)
     assert quiet.level_dbm("goal") == -80.0 and quiet.pass_floor_dbm("goal") == -92.0
     assert quiet.close("goal", -81.0) is not None and quiet.close("goal", -88.0) is None
-    # fixes that land far from the poses make the beacon weak, refused ones included (each up to FIX_CLIP_M)
-    assert levels.learned_variance_m2("goal") == pytest.approx(1.5**2)
-    for _ in range(30):
-        levels.judged("goal", np.array([30.0, 0.0]), np.eye(2) * 0.1, taken=False)
-    assert levels.levels["goal"].refused == 30
-    assert 15.0 < levels.learned_variance_m2("goal") < 0.5 * FIX_CLIP_M**2
-    assert levels.close("goal", -60.0)[0, 0] == pytest.approx(levels.learned_variance_m2("goal"))
-    for _ in range(200):
-        levels.judged("goal", np.array([0.1, 0.0]), np.eye(2) * 0.1, taken=True)
-    assert levels.close("goal", -60.0)[0, 0] == pytest.approx(near[0, 0])  # consistent again: the file's figure
+
+
+def test_a_beacon_learns_where_its_close_passes_are_and_how_many_are_far():
+    """Chairs that peak 2.5 m in front of the goal (+x), within 0.8 m, and candidates of which 40 % are far
+    passes 6-16 m out: the close kind's offset and share are learned, a far candidate is sent as a far fix."""
+    beacon = Beacon("goal", 1.575, 7.5, tx_power_dbm=-59.0, height_m=2.9)
+    levels = BeaconLevels((beacon,))
+    rng = np.random.default_rng(7)
+    pose_cov, stated = np.eye(2) * 0.1, np.eye(2) * 4.0
+    kinds = []
+    for _ in range(300):
+        if rng.random() < 0.6:
+            from_beacon = np.array([2.5, 0.0]) + rng.normal(0.0, 0.8, 2)
+        else:
+            from_beacon = np.array([rng.uniform(6.0, 16.0), rng.uniform(-7.0, 7.0)])
+        pose = np.array([beacon.x_m, beacon.y_m]) + from_beacon + rng.normal(0.0, math.sqrt(0.1), 2)
+        kinds.append(levels.fix("goal", pose, pose_cov, stated)[2])
+    record = levels.levels["goal"]
+    assert record.close.offset_m() == pytest.approx([2.5, 0.0], abs=0.4)  # in front of the goal, not under it
+    assert 0.45 < levels.close_share("goal") < 0.75
+    assert record.close_fixes + record.far_fixes == 300 and 0.45 < np.mean(kinds) < 0.75
+    near_point, near_cov, close = levels.fix("goal", np.array([beacon.x_m + 2.6, beacon.y_m]), pose_cov, stated)
+    assert close and np.hypot(*(near_point - [beacon.x_m + 2.5, beacon.y_m])) < 0.4
+    assert near_cov[0, 0] == pytest.approx(4.0, rel=0.2)  # the venue file's sigma: the learned spread is below it
+    far_point, far_cov, close = levels.fix("goal", np.array([beacon.x_m + 14.0, beacon.y_m + 5.0]), pose_cov, stated)
+    assert not close and far_point[0] > beacon.x_m + 6.0 and far_cov[0, 0] > 9.0  # metres, not a spot
 
 
 def test_the_contact_distance_is_learned_from_the_contacts_taken():
