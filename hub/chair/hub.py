@@ -477,6 +477,9 @@ class ChairHub:
             opposed, line = self._push_line(a, b, time_ns, pushes)
             if not opposed:
                 self.counters.pushes_not_opposed += 1
+            elif line is not None and _off_line(contact_m * line - delta, pose_a[1] + pose_b[1]
+                                                + _push_shape(line, contact_m, contact_var)) > FIX_GATE_CHI2:
+                self.counters.gated_out += 1  # where the pushes put the other chair, the poses do not
             else:
                 candidates.append((score, a, b, unit, innovation, var_a, var_b, line, delta, pose_a[1], pose_b[1]))
         out, taken = [], set()
@@ -488,8 +491,7 @@ class ChairHub:
             self.counters.pairs += 1
             self.contact.taken(contact_m - innovation, var_a + var_b)
             if line is not None:  # the pushes say where the other chair was, along the line and across it
-                across = np.array([-line[1], line[0]])
-                shape = contact_var * np.outer(line, line) + (contact_m * PUSH_LINE_SD) ** 2 * np.outer(across, across)
+                shape = _push_shape(line, contact_m, contact_var)
                 offset = contact_m * line - delta
                 for me, other, measured, noise in ((a, b, offset, cov_b), (b, a, -offset, cov_a)):
                     out.append(self._send(self.agents[me], time_ns, measured, noise + shape, Kind.COLLISION,
@@ -561,3 +563,15 @@ def _court_unit(push: tuple[float, float], heading: float) -> np.ndarray | None:
         return None
     c, s = math.cos(heading), math.sin(heading)
     return np.array([c * forward - s * left, s * forward + c * left]) / size
+
+
+def _push_shape(line: np.ndarray, contact_m: float, contact_var: float) -> np.ndarray:
+    """Covariance of where a contact's pushes put the other chair: the contact distance's spread along
+    their line, `PUSH_LINE_SD` of its direction across it."""
+    across = np.array([-line[1], line[0]])
+    return contact_var * np.outer(line, line) + (contact_m * PUSH_LINE_SD) ** 2 * np.outer(across, across)
+
+
+def _off_line(offset: np.ndarray, covariance: np.ndarray) -> float:
+    """Squared Mahalanobis size of the offset between where the pushes and the poses put the other chair."""
+    return float(offset @ np.linalg.solve(covariance, offset))

@@ -97,6 +97,27 @@ def test_the_pushes_say_which_side_the_other_chair_was_on():
     assert cov[1, 1] < 1.0  # the constraint holds across the estimates' line, not only along it
 
 
+@pytest.mark.parametrize("sd_x, sd_y, paired", [(0.2, 1.5, False), (1.5, 1.5, True)], ids=["sure-across", "unsure"])
+def test_a_pair_is_gated_where_its_pushes_put_the_other_chair_not_only_by_distance(sd_x, sd_y, paired):
+    """Poses 4.7 m apart, pushes along the line between them: the distance alone is within the gate
+    either way (its variance is the poses' along the line, mostly y), but where the pushes put the
+    other chair is 2 m off in x, which poses sure of their x (0.2 m) rule out: two bumps that
+    coincided, not a contact (a 317 s game's chair was pulled 5 m by one such pair)."""
+    hub = ChairHub(venue(2), HubSettings(corrections=frozenset({"collision"})))
+    positions = {"c0": (10.0, 5.0), "c1": (12.5, 9.0)}
+    cov = np.diag([sd_x**2, sd_y**2, 0.01]).ravel().tolist()
+    for t in np.arange(0.0, 4.0, 0.02):
+        for agent, (x, y) in positions.items():
+            hub.on_message(messages.new("EstimatedPose", timestamp_ns=int(t * S), agent_id=agent, x_m=x, y_m=y,
+                                        covariance=cov, method="reckon", track=messages.Track.LIVE), int(t * S))
+        if abs(t - 2.0) < 1e-9:
+            away = np.array([-2.5, -4.0]) / np.hypot(2.5, 4.0)  # from c1 to c0; both head 0 (forward = +x)
+            send(hub, impact("c0", int(2.0 * S), push=tuple(8.0 * away)))
+            send(hub, impact("c1", int(2.0 * S) + 1000, push=tuple(-8.0 * away)))
+    assert hub.counters.groups == 1 and hub.counters.pairs == (1 if paired else 0)
+    assert hub.counters.gated_out == (0 if paired else 1)
+
+
 def test_four_impacts_at_once_give_two_pairs():
     hub = ChairHub(venue(4), HubSettings(corrections=frozenset({"collision"})))
     positions = {"c0": (5.0, 5.0), "c1": (5.9, 5.0), "c2": (20.0, 9.0), "c3": (20.0, 10.0)}
