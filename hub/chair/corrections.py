@@ -34,6 +34,7 @@ ACCEPT_DB = 3.0  # a pass peaking this close to the level was a close one
 FIX_PRIOR_SD_M = 1.5  # a close pass's distance from the beacon, until the beacon's own are learned
 FIX_PRIOR_WEIGHT = 3.0  # the prior counts as this many fixes
 FIX_MEMORY = 30.0  # fixes: forgetting of the learned spread
+COMPONENT_FLOOR_SD_M = 0.5  # RSSI puts a chair no closer than this to where a kind of pass puts it
 FAR_PRIOR_SD_M = 5.0  # a candidate that was not close: somewhere in the beacon's end of the court
 CLOSE_PRIOR_SHARE = 0.5  # of a beacon's candidate passes, the share that were close, until its own are counted
 CLOSE_PRIOR_WEIGHT = 5.0  # the prior counts as this many candidates
@@ -65,7 +66,10 @@ class _Component:
         return self.offset_sum_m / (self.weight + FIX_PRIOR_WEIGHT)
 
     def variance_m2(self) -> float:
-        return (self.spread_sum_m2 + FIX_PRIOR_WEIGHT * self.prior_sd_m**2) / (self.weight + FIX_PRIOR_WEIGHT)
+        """Never below COMPONENT_FLOOR_SD_M: poses that state more variance than they have would drive the
+        spread beyond it negative."""
+        learned = (self.spread_sum_m2 + FIX_PRIOR_WEIGHT * self.prior_sd_m**2) / (self.weight + FIX_PRIOR_WEIGHT)
+        return max(learned, COMPONENT_FLOOR_SD_M**2)
 
     def learn(self, responsibility: float, from_beacon: np.ndarray, pose_covariance: np.ndarray) -> None:
         forget = 1.0 - 1.0 / FIX_MEMORY

@@ -299,6 +299,12 @@ def test_a_beacon_learns_where_its_close_passes_are_and_how_many_are_far():
     assert near_cov[0, 0] == pytest.approx(4.0, rel=0.2)  # the venue file's sigma: the learned spread is below it
     far_point, far_cov, close = levels.fix("goal", np.array([beacon.x_m + 14.0, beacon.y_m + 5.0]), pose_cov, stated)
     assert not close and far_point[0] > beacon.x_m + 6.0 and far_cov[0, 0] > 9.0  # metres, not a spot
+    # poses that state far more variance than their innovations show: spreads stay positive, fixes finite
+    for _ in range(200):
+        levels.fix("goal", np.array([beacon.x_m + 2.5, beacon.y_m]), np.eye(2) * 50.0, stated)
+    assert record.close.variance_m2() > 0.0 and record.far.variance_m2() > 0.0
+    point, cov, _ = levels.fix("goal", np.array([beacon.x_m + 12.0, beacon.y_m]), np.eye(2) * 0.1, stated)
+    assert np.all(np.isfinite(point)) and np.all(np.linalg.eigvalsh(cov) > 0.0)
 
 
 def test_the_contact_distance_is_learned_from_the_contacts_taken():
