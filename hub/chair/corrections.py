@@ -149,6 +149,14 @@ class BeaconLevels:
         record = self.levels[beacon_id]
         return (record.close_sum + CLOSE_PRIOR_WEIGHT * CLOSE_PRIOR_SHARE) / (record.close_weight + CLOSE_PRIOR_WEIGHT)
 
+    def describe(self, beacon_id: str) -> str:
+        """What this beacon has shown, for the hub's closing summary."""
+        record = self.levels[beacon_id]
+        dx, dy = record.close.offset_m()
+        return (f"{record.close_fixes} close-pass fixes, {record.far_fixes} far; close passes "
+                f"{self.close_share(beacon_id):.0%} of candidates, at ({dx:+.1f}, {dy:+.1f}) m from the beacon "
+                f"+- {math.sqrt(record.close.variance_m2()):.1f} m; level {self.level_dbm(beacon_id):.0f} dBm")
+
     def fix(self, beacon_id: str, pose_xy: np.ndarray, pose_covariance: np.ndarray,
             close_covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         """(point, covariance, close) of a candidate's fix for a pose at its peak; the beacon learns from it."""

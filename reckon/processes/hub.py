@@ -65,6 +65,7 @@ class HubSummary:
     reapplied: int = 0  # inputs re-applied from the recording after a restart
     swims: dict[str, SwimTotals] = field(default_factory=dict)  # sensor -> its lengths so far
     walkers: dict[str, str] = field(default_factory=dict)  # pedestrian -> its map-matched poses and the last one
+    beacons: dict[str, str] = field(default_factory=dict)  # a chair venue's beacon -> what its passes showed
 
     def __str__(self) -> str:
         total = sum(sum(kinds.values()) for kinds in self.corrections.values())
@@ -77,6 +78,8 @@ class HubSummary:
             text += f"\n  {sensor_id}: {swim}"
         for agent_id, line in sorted(self.walkers.items()):
             text += f"\n  {agent_id}: {line}"
+        for beacon_id, line in sorted(self.beacons.items()):
+            text += f"\n  beacon {beacon_id}: {line}"
         return text
 
 
@@ -209,6 +212,9 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
     summary.pairs = hub.counters.pairs
     summary.duplicates, summary.stale = dedup.counters.duplicates, dedup.counters.stale
     summary.walkers = {view.agent_id: view.describe() for view in hub.pedestrians.agents.values() if view.poses}
+    levels = hub.chairs.beacon_levels
+    summary.beacons = {beacon_id: levels.describe(beacon_id) for beacon_id in levels.beacons
+                       if levels.levels[beacon_id].close_fixes + levels.levels[beacon_id].far_fixes}
     return summary
 
 

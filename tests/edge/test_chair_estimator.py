@@ -294,6 +294,8 @@ def test_a_beacon_learns_where_its_close_passes_are_and_how_many_are_far():
     assert record.close.offset_m() == pytest.approx([2.5, 0.0], abs=0.4)  # in front of the goal, not under it
     assert 0.45 < levels.close_share("goal") < 0.75
     assert record.close_fixes + record.far_fixes == 300 and 0.45 < np.mean(kinds) < 0.75
+    line = levels.describe("goal")
+    assert line.startswith(f"{record.close_fixes} close-pass fixes, {record.far_fixes} far") and "(+2." in line
     near_point, near_cov, close = levels.fix("goal", np.array([beacon.x_m + 2.6, beacon.y_m]), pose_cov, stated)
     assert close and np.hypot(*(near_point - [beacon.x_m + 2.5, beacon.y_m])) < 0.4
     assert near_cov[0, 0] == pytest.approx(4.0, rel=0.2)  # the venue file's sigma: the learned spread is below it
