@@ -151,9 +151,15 @@ def _play_once(game: Path, session: Any, folder: Path, speed: float, selectors: 
             raise ReckonError(f"bench: {child.name} exited with {child.exited.returncode}; see {child.log_path}")
     exited = {agent_id: edge.reap(0) for agent_id, edge in edges.items()}
     hub_exited = hub.reap(0)
-    summary = (logs / "hub.log").read_text(errors="replace").strip().splitlines()
     return Play(int(start_at * 1e9), edges_up_ns, edges_done_ns, hub_exited, exited, recording,
-                summary[-1] if summary else "", cpu_at_start, busy_s, own_s, received)
+                hub_summary_line((logs / "hub.log").read_text(errors="replace")), cpu_at_start, busy_s, own_s, received)
+
+
+def hub_summary_line(log_text: str) -> str:
+    """The hub's closing summary line (reckon/processes/hub.py HubSummary) in its log, without the
+    indented lines after it (a beacon's, a walker's, a swimmer's); "" if it never wrote one."""
+    lines = [line for line in log_text.splitlines() if line.startswith("hub ")]
+    return lines[-1] if lines else ""
 
 
 def _collect(subscription: Subscription | None, into: list[Received], duration_s: float) -> int:

@@ -21,6 +21,7 @@ import numpy as np
 from protocol.errors import ReckonError
 from protocol.session_log import read_description
 from reckon.bench.children import Child, cli_command, vm_kb
+from reckon.bench.play import hub_summary_line
 from reckon.bench.report import machine_info
 from reckon.transport.bus import free_endpoint
 from sim_devices.wheelchair import simulate
@@ -90,7 +91,7 @@ def run_soak(out: Path, hours: float = 1.0, players: int = PLAYERS, seed: int = 
         "machine": machine,
         "details": {"processes": processes, "wall_s": wall_s, "simulate_s": simulate_s, "samples": len(times),
                     "cpu_s": {name: child.exited.cpu_s for name, child in children.items()},
-                    "hub_summary": (hub.log_path.read_text(errors="replace").strip().splitlines() or [""])[-1],
+                    "hub_summary": hub_summary_line(hub.log_path.read_text(errors="replace")),
                     "plot": str(plot) if plot else None},
     }
 
