@@ -10,7 +10,7 @@ import pytest
 
 from edge.chair.estimator import (BIAS, GYRO_SCALE, HEADING, X, Y, ChairSample, ChairSettings, Flag, position_update, start,
                                   step, wheel_turn_ratio_prior)
-from hub.chair.corrections import BeaconLevels, ContactDistance, contact_update
+from hub.chair.corrections import BEACON_BASE_SD_M, BeaconLevels, ContactDistance, contact_update
 from protocol.session import Beacon
 
 SETTINGS = ChairSettings(wheel_diameter_m=0.6)
@@ -264,7 +264,7 @@ def test_beacon_fixes_follow_the_venue_file_and_what_the_beacon_has_shown():
     stated = -59.0 - 20 * math.log10(math.hypot(1.0, 2.4))  # the file's level: 1 m from under it, free space
     assert levels.level_dbm("goal") == pytest.approx(stated) and levels.pass_floor_dbm("goal") == pytest.approx(stated - 12)
     near, far = levels.close("goal", -60.0), levels.close("goal", -68.0)
-    assert near is not None and far is not None and far[0, 0] > near[0, 0] >= 4.0  # sigma >= 2 m
+    assert near is not None and far is not None and far[0, 0] > near[0, 0] >= BEACON_BASE_SD_M**2  # sigma >= 3 m
     assert levels.close("goal", -85.0) is None  # tens of metres by the venue file, and far below the level
     assert levels.level_dbm("goal") == -68.0 and levels.pass_floor_dbm("goal") == -80.0  # learned from 3 peaks
     # a hall quieter than its file: this beacon's passes peak near -80 dBm; its own close ones count
