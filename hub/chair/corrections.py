@@ -162,18 +162,18 @@ class BeaconLevels:
             close_covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         """(point, covariance, close) of a candidate's fix for a pose at its peak; the beacon learns from it."""
         record, beacon = self.levels[beacon_id], self.beacons[beacon_id]
-        from_beacon = pose_xy - np.array([beacon.x_m, beacon.y_m])
+        at = np.array([beacon.x_m, beacon.y_m])
+        from_beacon = pose_xy - at
         far_covariance = np.eye(2) * record.far.variance_m2()
         share = self.close_share(beacon_id)
         near = share * _density(from_beacon - record.close.offset_m(), pose_covariance + close_covariance)
         far = (1.0 - share) * _density(from_beacon - record.far.offset_m(), pose_covariance + far_covariance)
         responsibility = near / (near + far) if near + far > 0.0 else 0.0
-        point = np.array([beacon.x_m, beacon.y_m])
         if responsibility >= 0.5:
-            point, covariance = point + record.close.offset_m(), close_covariance / responsibility
+            point, covariance = at + record.close.offset_m(), close_covariance / responsibility
             record.close_fixes += 1
         else:
-            point, covariance = point + record.far.offset_m(), far_covariance / (1.0 - responsibility)
+            point, covariance = at + record.far.offset_m(), far_covariance / (1.0 - responsibility)
             record.far_fixes += 1
         record.close.learn(responsibility, from_beacon, pose_covariance)
         record.far.learn(1.0 - responsibility, from_beacon, pose_covariance)
@@ -183,9 +183,14 @@ class BeaconLevels:
         return point, covariance, responsibility >= 0.5
 
 
+def mahalanobis2(deviation: np.ndarray, covariance: np.ndarray) -> float:
+    """The squared Mahalanobis size of `deviation` under `covariance` (what the chi-square gates compare)."""
+    return float(deviation @ np.linalg.solve(covariance, deviation))
+
+
 def _density(deviation: np.ndarray, covariance: np.ndarray) -> float:
     """The 2-D normal density of `deviation` under `covariance`."""
-    return math.exp(-0.5 * float(deviation @ np.linalg.solve(covariance, deviation))) / (
+    return math.exp(-0.5 * mahalanobis2(deviation, covariance)) / (
         2.0 * math.pi * math.sqrt(float(np.linalg.det(covariance))))
 
 

@@ -53,7 +53,7 @@ from typing import Any
 
 import numpy as np
 
-from hub.chair.corrections import CONTACT_GATE_CHI2, BeaconLevels, ContactDistance
+from hub.chair.corrections import CONTACT_GATE_CHI2, BeaconLevels, ContactDistance, mahalanobis2
 from hub.clocks import ClockOffsets
 from hub.chair.smoother import FixedLagSmoother
 from protocol import keys, messages
@@ -359,7 +359,7 @@ class ChairHub:
             return []
         shift = xy - then[0]
         spread = then[1] + covariance + (view.extra if kind in (Kind.VIDEO, Kind.MANUAL) else 0.0)
-        taken = float(shift @ np.linalg.solve(spread, shift)) <= FIX_GATE_CHI2
+        taken = mahalanobis2(shift, spread) <= FIX_GATE_CHI2
         if not taken:
             if kind != Kind.VIDEO or not self._relock(view, time_ns, shift, covariance, source):
                 self.counters.gated_out += 1
@@ -477,8 +477,8 @@ class ChairHub:
             opposed, line = self._push_line(a, b, time_ns, pushes)
             if not opposed:
                 self.counters.pushes_not_opposed += 1
-            elif line is not None and _off_line(contact_m * line - delta, pose_a[1] + pose_b[1]
-                                                + _push_shape(line, contact_m, contact_var)) > FIX_GATE_CHI2:
+            elif line is not None and mahalanobis2(contact_m * line - delta, pose_a[1] + pose_b[1]
+                                                   + _push_shape(line, contact_m, contact_var)) > FIX_GATE_CHI2:
                 self.counters.gated_out += 1  # where the pushes put the other chair, the poses do not
             else:
                 candidates.append((score, a, b, unit, innovation, var_a, var_b, line, delta, pose_a[1], pose_b[1]))
@@ -570,8 +570,3 @@ def _push_shape(line: np.ndarray, contact_m: float, contact_var: float) -> np.nd
     their line, `PUSH_LINE_SD` of its direction across it."""
     across = np.array([-line[1], line[0]])
     return contact_var * np.outer(line, line) + (contact_m * PUSH_LINE_SD) ** 2 * np.outer(across, across)
-
-
-def _off_line(offset: np.ndarray, covariance: np.ndarray) -> float:
-    """Squared Mahalanobis size of the offset between where the pushes and the poses put the other chair."""
-    return float(offset @ np.linalg.solve(covariance, offset))
