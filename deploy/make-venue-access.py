@@ -16,7 +16,8 @@ What the rules allow (everything else is denied; a deny beats an allow):
 - `hub.<venue>`: anything under `reckon/<venue>/**` (the hub, and `reckon record`/`reckon replay`
   run with the hub's credentials).
 - `edge.<venue>.<agent>`: publish under `reckon/<venue>/<agent>/**` except the hub's outputs
-  (`correction`, `pose/live`, `pose/refined`, `identity`); subscribe to its own `correction`;
+  (`correction`, `field_map`, `pose/live`, `pose/refined`, `identity`); subscribe to its own
+  `correction` and `field_map`;
   its liveliness token and flush queryable `reckon/<venue>/alive/edge/<agent>`; see the venue's
   other processes and ask them for flush barriers (`reckon/<venue>/alive/**`); learn which
   subscriptions the venue has (without them a client drops what it publishes).
@@ -38,7 +39,7 @@ from typing import Any
 import json5
 
 TEMPLATES = Path(__file__).resolve().parent / "zenoh"
-HUB_OUTPUTS = ("correction", "pose/live", "pose/refined", "identity")  # only the hub publishes these
+HUB_OUTPUTS = ("correction", "field_map", "pose/live", "pose/refined", "identity")  # only the hub publishes these
 EVERY_MESSAGE = ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
                  "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
 PASSWORD_BYTES = 18  # 24 url-safe characters: no ':' (the file's separator), no whitespace
@@ -64,8 +65,9 @@ def _edge_rules(venue: str, agent: str) -> list[dict[str, Any]]:
         _rule(f"{user} publishes", "allow", ["ingress"], ["put", "delete"], [f"{own}/**"]),
         _rule(f"{user} not the hub's outputs", "deny", ["ingress"], ["put", "delete"],
               [f"{own}/{stream}" for stream in HUB_OUTPUTS]),
-        _rule(f"{user} subscribes to its corrections", "allow", ["ingress"], ["declare_subscriber"], [f"{own}/correction"]),
-        _rule(f"{user} receives its corrections", "allow", ["egress"], ["put"], [f"{own}/correction"]),
+        _rule(f"{user} subscribes to its corrections", "allow", ["ingress"], ["declare_subscriber"],
+              [f"{own}/correction", f"{own}/field_map"]),
+        _rule(f"{user} receives its corrections", "allow", ["egress"], ["put"], [f"{own}/correction", f"{own}/field_map"]),
         _rule(f"{user} is alive", "allow", ["ingress"], ["liveliness_token", "declare_queryable", "reply"],
               [f"{alive}/edge/{agent}"]),
         # flush barriers (bus.flush) are queries on `alive/*/*`: a superset of the edge's own key,

@@ -28,6 +28,8 @@ class EdgeSummary:
     poses: int = 0
     impacts: int = 0
     corrections: int = 0
+    field_readings: int = 0  # chairs: magnetometer readings offered to the hub's field map
+    field_maps: int = 0  # chairs: field maps taken from the hub
     extrapolated: int = 0
     wheel_overrun: int = 0
     bridged: int = 0  # chairs: samples where the seat was silent and the wheels alone told the turn
@@ -49,7 +51,8 @@ class EdgeSummary:
             return (f"edge {self.agent_id}: {self.messages_in} messages in, {self.samples} samples, "
                     f"{self.poses} steps out; last pose {pose}")
         return (f"edge {self.agent_id}: {self.messages_in} messages in, {self.samples} samples, "
-                f"{self.poses} poses and {self.impacts} impacts out, {self.corrections} corrections applied "
+                f"{self.poses} poses and {self.impacts} impacts out, {self.corrections} corrections applied, "
+                f"{self.field_readings} field readings out and {self.field_maps} field maps in "
                 f"({self.extrapolated} samples with a wheel extrapolated, {self.wheel_overrun} behind the wheel "
                 f"history, {self.bridged} bridging a silent seat){self._calibration()}; last pose {pose}")
 
@@ -89,6 +92,10 @@ class Edge(Protocol):
 
     def pressure(self, reading: Any) -> None:
         """A Pressure reading of this agent's barometer (ignored by an edge without floors)."""
+        ...
+
+    def field_map(self, field_map: Any) -> None:
+        """The hub's FieldMap of the hall's magnetic field for this agent (ignored by an edge without one)."""
         ...
 
     def warnings(self) -> list[str]:

@@ -73,6 +73,16 @@ def correction(venue: str, agent: str) -> str:
     return f"{ROOT}/{venue}/{agent}/correction"
 
 
+def field(venue: str, agent: str) -> str:
+    """The edge's magnetometer readings for the hub's field map (FieldReading)."""
+    return f"{ROOT}/{venue}/{agent}/field"
+
+
+def field_map(venue: str, agent: str) -> str:
+    """The hub's map of the hall's magnetic field, for one agent's edge (FieldMap)."""
+    return f"{ROOT}/{venue}/{agent}/field_map"
+
+
 def fix(venue: str, agent: str) -> str:
     """Manual or video position fixes of one agent, into the hub."""
     return f"{ROOT}/{venue}/{agent}/fix"

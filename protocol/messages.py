@@ -146,6 +146,34 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("sequence", "uint32", False),  # per agent, from 1: poses say which they include
         ("covariance", "double", True),  # 2 x 2 row-major (m^2) of the measurement (dx, dy)
     ],
+    # Edge -> hub: the seat magnetometer's field direction where the chair was, for the hub's map of
+    # the hall's field (hub/chair/field_map.py). timestamp_ns is the device clock; offset_rad is the
+    # field's angle in the chair less the edge's (north - heading), with that difference's variance.
+    "FieldReading": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("x_m", "double", False),
+        ("y_m", "double", False),
+        ("offset_rad", "double", False),
+        ("variance_rad2", "double", False),
+    ],
+    # Hub -> edge: the hall's field as every chair saw it, a grid of `columns` x `rows` square cells
+    # from (origin_x_m, origin_y_m), row-major from the origin's row. Per cell the field direction's
+    # offset (rad, as FieldReading's) and what is left of the disturbance after it (rad^2);
+    # variance 0: nothing known there. timestamp_ns is the venue clock.
+    "FieldMap": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("origin_x_m", "double", False),
+        ("origin_y_m", "double", False),
+        ("cell_m", "double", False),
+        ("columns", "uint32", False),
+        ("rows", "uint32", False),
+        ("offset_rad", "double", True),
+        ("variance_rad2", "double", True),
+    ],
     # An absolute position from outside the sensors (an operator, a video frame): the agent was
     # at (x, y) at timestamp_ns (venue clock). The hub turns it into a Correction.
     "PositionFix": [

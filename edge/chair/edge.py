@@ -7,8 +7,10 @@ without numba; by default they are compiled just in time, which the tests use. A
 fixed schedule of the seat clock (`pose_rate_hz`), an ImpactEvent at once. Corrections from the hub (`correct`) are applied before the next sample,
 to the state as it is then: a Correction measures where the chair was at its time, as an offset
 from the pose the hub had for that time, and the few samples since then moved the chair the same
-whatever its error. `reckon edge` wraps this in Zenoh; `reckon eval` drives it in lockstep with
-the hub.
+whatever its error. The hub's map of the hall's magnetic field (`field_map`, hub/chair/field_map.py)
+is looked up where the chair is before each batch and handed to the filter's magnetometer aid; each
+reading the aid offers the map goes out as a FieldReading. `reckon edge` wraps this in Zenoh;
+`reckon eval` drives it in lockstep with the hub.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from protocol import messages
 from protocol.session import Agent
 
 NO_GATE = math.inf  # the hub gated the correction already, against the same pose
+MAX_MAP_CELLS = 65_536  # a 500 x 260 m hall in 2 m cells: a bigger map is refused, not held
 
 
 class ChairEdge:
@@ -59,6 +62,9 @@ class ChairEdge:
         self.correction_sequence = 0
         self.samples = self.poses = self.impacts = self.corrections_applied = 0
         self.axle_check = Flag.NONE  # the seat gyro's one scale check against the axle IMUs, once made
+        self.map: tuple[float, float, float, np.ndarray, np.ndarray] | None = None  # origin, cell, offsets, variances
+        self.field_count = 0  # the aid's readings published so far
+        self.maps_taken = self.maps_refused = 0
         self.pending_warnings: list[str] = []
 
     @property
@@ -75,6 +81,30 @@ class ChairEdge:
         """Queue a hub Correction; it is applied before the next sample (or with the next pose)."""
         self.corrections.append(correction)
 
+    def field_map(self, field_map: Any) -> None:
+        """The hub's map of the hall's field (hub/chair/field_map.py): used from the next batch on; an
+        empty one (no cells) drops the map, and the aid falls back to its own model of the hall."""
+        columns, rows, cell_m = field_map.columns, field_map.rows, field_map.cell_m
+        if columns * rows == 0:
+            self.map = None
+            self.maps_taken += 1
+            return
+        cells = columns * rows
+        if (cells > MAX_MAP_CELLS or len(field_map.offset_rad) != cells or len(field_map.variance_rad2) != cells
+                or not cell_m > 0.0):
+            self.maps_refused += 1
+            if self.maps_refused in (1, 10, 100) or self.maps_refused % 1000 == 0:
+                self.pending_warnings.append(
+                    f"{self.agent.id}: field map refused ({self.maps_refused} so far): {columns} x {rows} cells of "
+                    f"{cell_m} m with {len(field_map.offset_rad)} offsets and {len(field_map.variance_rad2)} variances "
+                    f"(at most {MAX_MAP_CELLS} cells, one of each per cell)")
+            return
+        offsets = np.array(field_map.offset_rad[:], dtype=float).reshape(rows, columns)
+        variances = np.array(field_map.variance_rad2[:], dtype=float).reshape(rows, columns)
+        variances[~(np.isfinite(offsets) & np.isfinite(variances) & (variances > 0.0))] = 0.0  # not known there
+        self.map = (field_map.origin_x_m, field_map.origin_y_m, cell_m, offsets, variances)
+        self.maps_taken += 1
+
     def scan(self, scan: Any) -> None:
         """A chair has no stands to scan."""
 
@@ -88,6 +118,7 @@ class ChairEdge:
     def summarise(self, summary: EdgeSummary) -> None:
         summary.samples, summary.poses, summary.impacts = self.samples, self.poses, self.impacts
         summary.corrections = self.corrections_applied
+        summary.field_readings, summary.field_maps = self.field_count, self.maps_taken
         counters = self.merger.counters
         summary.extrapolated, summary.wheel_overrun, summary.bridged = (counters.extrapolated, counters.wheel_overrun,
                                                                         counters.bridged)
@@ -120,10 +151,12 @@ class ChairEdge:
         filter has started (its first merged sample), the two steps apart."""
         if self.vector is not None:
             self._apply_corrections()
+            if self.map is not None or self.vector[layout.MAP_VAR] != 0.0:
+                self._look_up_map()
             merged, *ran = self.kernels.merge_and_run(*merge_arguments, self.packed_settings, self.vector,
                                                      self.next_pose_ns, self.period_ns)
             self.samples += merged
-            return self._publish(*ran)
+            return self._publish(*ran) + self._field_reading()
         times, values = self.kernels.merge_batch(*merge_arguments)
         if not len(times):
             return []
@@ -134,6 +167,42 @@ class ChairEdge:
         self._apply_corrections()
         return self._publish(*self.kernels.run_poses(self.packed_settings, self.vector, times[1:], values[1:],
                                                      self.next_pose_ns, self.period_ns))
+
+    def _look_up_map(self) -> None:
+        """The map's offset and variance where the chair is, into the filter's state: bilinear between
+        the four nearest cell centres, over those known (none known: no map here)."""
+        offset = variance = 0.0
+        if self.map is not None:
+            origin_x, origin_y, cell_m, offsets, variances = self.map
+            rows, columns = offsets.shape
+            u = (self.vector[layout.MEAN] - origin_x) / cell_m - 0.5
+            v = (self.vector[layout.MEAN + 1] - origin_y) / cell_m - 0.5
+            column, row = math.floor(u), math.floor(v)
+            fu, fv = u - column, v - row
+            total = 0.0
+            for dr, wr in ((0, 1.0 - fv), (1, fv)):
+                for dc, wc in ((0, 1.0 - fu), (1, fu)):
+                    r, c = min(max(row + dr, 0), rows - 1), min(max(column + dc, 0), columns - 1)
+                    weight = wr * wc
+                    if variances[r, c] > 0.0 and weight > 0.0:
+                        total += weight
+                        offset += weight * offsets[r, c]
+                        variance += weight * variances[r, c]
+            if total > 0.0:
+                offset, variance = offset / total, variance / total
+        self.vector[layout.MAP_OFFSET], self.vector[layout.MAP_VAR] = offset, variance
+
+    def _field_reading(self) -> list[Any]:
+        """The aid's newest reading for the hub's map, if it made one in this batch (readings come at
+        most every `mag_period_s`: of two in one batch, the later goes)."""
+        count = int(self.vector[layout.FIELD_COUNT])
+        if count == self.field_count:
+            return []
+        self.field_count = count
+        v = self.vector
+        time_ns = (int(v[layout.FIELD_TIME_HIGH]) << 32) + int(v[layout.FIELD_TIME_LOW])
+        return [messages.new("FieldReading", timestamp_ns=time_ns, agent_id=self.agent.id, x_m=float(v[layout.FIELD_X]), y_m=float(v[layout.FIELD_Y]),
+                             offset_rad=float(v[layout.FIELD_OFFSET]), variance_rad2=float(v[layout.FIELD_VAR]))]
 
     def _publish(self, vector: np.ndarray, flags: int, next_pose_ns: int, pose_times: np.ndarray, poses: np.ndarray,
                  impact_times: np.ndarray, impacts: np.ndarray) -> list[Any]:

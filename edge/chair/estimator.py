@@ -31,7 +31,12 @@ seat-gyro scale error (1), magnetic north in the court frame (rad).
     heading and re-learned after `mag_recover_rejections` rejections in a row;
   - a hall more disturbed than `mag_trust_sd_deg` is trusted less than its spread says (chairs
     keep to a few places, so its errors do not average out as independent readings would);
-  - every reading's variance includes the fitted centre's own uncertainty.
+  - every reading's variance includes the fitted centre's own uncertainty;
+  - the hub maps the hall from every chair's readings (hub/chair/field_map.py); where its map,
+    handed in by the edge as `MagAid.map_offset_rad` / `map_var_rad2`, leaves less than the hall's
+    own disturbance, its offset comes out of north - heading (not out of the turn: a difference
+    over metres, to which the map's cell-to-cell errors would add); each reading that counts for
+    the statistics, north known, is offered to the map (`MagAid.field_*`).
   Tilt comes from gravity measured while still, never while moving (a sprint's 2.5 m/s^2 would
   read as 14 deg of pitch).
 - Uncertainty grows with distance and rotation, not time; an impact adds a shove variance in
@@ -156,6 +161,21 @@ class MagAid:
     turn_gyro_rad: float  # raw seat-gyro turn since then (trapezoid, before bias and scale)
     turn_s: float  # and the time
     turn_m: float  # and the travel
+    # The hub's map of the hall's field (hub/chair/field_map.py) where the chair is, set by the edge
+    # before each batch: the field's direction offset there (rad) and what is left of the
+    # disturbance after it (rad^2); 0: no map here. The map is used only where it leaves less than
+    # the hall's own learned disturbance (a clean hall's map holds the chairs' heading errors).
+    map_offset_rad: float = 0.0
+    map_var_rad2: float = 0.0
+    # The last reading offered to the map (once per `mag_min_step_m` of travel, north known): its
+    # number, time and place, and the field's angle there less the filter's (north - heading),
+    # whose variance is `field_var_rad2`. The edge publishes each new one as a FieldReading.
+    field_count: int = 0
+    field_time_ns: int = 0
+    field_x_m: float = 0.0
+    field_y_m: float = 0.0
+    field_offset_rad: float = 0.0
+    field_var_rad2: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -379,18 +399,28 @@ def _magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, gra
     if centre is None:
         return mag, mean, cov, Flag.NONE
     east, north_part = horizontal[0] - centre[0], horizontal[1] - centre[1]
-    angle = math.atan2(north_part, east)  # = north - heading
+    raw_angle = math.atan2(north_part, east)  # = north - heading + the hall's disturbance here
     radius = math.sqrt(east * east + north_part * north_part)
     if since_read >= settings.mag_min_step_m:
         mag = replace(mag, stats=_learn_disturbance(settings, mag.stats, radius, since_read), since_read_m=0.0)
+        if mag.ready:
+            mag = replace(mag, field_count=mag.field_count + 1, field_time_ns=sample.time_ns, field_x_m=float(mean[X]),
+                          field_y_m=float(mean[Y]), field_offset_rad=_wrap(raw_angle - (mean[NORTH] - mean[HEADING])),
+                          field_var_rad2=float(cov[NORTH, NORTH] - 2.0 * cov[NORTH, HEADING] + cov[HEADING, HEADING]))
     variance, correlation_m = mag_disturbance(settings, mag.stats)
-    centre_spread = _centre_spread(fit, radius, variance)
+    centre_spread = _centre_spread(fit, radius, variance)  # the strength's spread: untouched by a map of directions
     flags = Flag.NONE
     if not math.isfinite(mag.anchor_angle) or not math.isfinite(turn_gyro):
-        mag = replace(mag, anchor_angle=angle, turn_gyro_rad=0.0, turn_s=0.0, turn_m=0.0)
+        mag = replace(mag, anchor_angle=raw_angle, turn_gyro_rad=0.0, turn_s=0.0, turn_m=0.0)
     elif turn_s >= settings.mag_turn_s:
-        mean, cov, flags = _turn_update(settings, mag, angle, mean, cov, variance, correlation_m, centre_spread)
-        mag = replace(mag, anchor_angle=angle, turn_gyro_rad=0.0, turn_s=0.0, turn_m=0.0)
+        mean, cov, flags = _turn_update(settings, mag, raw_angle, mean, cov, variance, correlation_m, centre_spread)
+        mag = replace(mag, anchor_angle=raw_angle, turn_gyro_rad=0.0, turn_s=0.0, turn_m=0.0)
+    # north - heading: where the hub's map knows this place better than the hall's own model, its offset out
+    # (the turn above is a difference over metres, which a map's errors from cell to cell would only add to)
+    angle = raw_angle
+    mapped = _trusted(settings, mag.map_var_rad2) if mag.map_var_rad2 > 0.0 else math.inf
+    if mapped < variance:
+        angle, variance = _wrap(raw_angle - mag.map_offset_rad), mapped
     if not mag.ready or mag.rejections >= settings.mag_recover_rejections:
         # (re)learn north = angle + heading: it inherits the heading's error and all its correlations
         mean, cov = mean.copy(), cov.copy()
@@ -476,15 +506,19 @@ def _learn_disturbance(settings: ChairSettings, stats: np.ndarray, radius: float
     return out
 
 
+def _trusted(settings: ChairSettings, variance: float) -> float:
+    """A disturbance's variance as the aid uses it: floored, and beyond `mag_trust_sd_deg` grown with
+    its square (chairs keep to a few places, so its errors do not average out as independent
+    readings would)."""
+    variance = max(variance, (settings.mag_floor_sd_deg * DEG) ** 2)
+    return variance * max(1.0, variance / (settings.mag_trust_sd_deg * DEG) ** 2)
+
+
 def mag_disturbance(settings: ChairSettings, stats: np.ndarray) -> tuple[float, float]:
     """(heading variance rad^2, correlation length m) of the hall's field: learned, blended with the priors."""
     prior_weight, weight = settings.mag_level_weight, stats[M_WEIGHT]
     prior_var = (settings.mag_heading_sd_deg * DEG) ** 2
-    variance = max((stats[M_RADIAL] + prior_weight * prior_var) / (weight + prior_weight),
-                   (settings.mag_floor_sd_deg * DEG) ** 2)
-    # a strongly disturbed hall is trusted less than its spread says: chairs keep to a few places,
-    # so its errors do not average out as independent readings would
-    variance *= max(1.0, variance / (settings.mag_trust_sd_deg * DEG) ** 2)
+    variance = _trusted(settings, (stats[M_RADIAL] + prior_weight * prior_var) / (weight + prior_weight))
     correlation = settings.mag_correlation_prior_m
     if weight > 1.0 and stats[M_RADIAL] > 0.0:
         ratio = 0.5 * (stats[M_DIFF] / stats[M_RADIAL])  # 1 - exp(-step / L), exponential correlation

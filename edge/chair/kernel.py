@@ -84,7 +84,7 @@ def run_batch(settings: np.ndarray, state: np.ndarray, times: np.ndarray,
             flags[i] = BACKWARDS
             out[FLAGS] = BACKWARDS
             continue
-        flags[i] = _step(settings, out, mean, cov, fit, work, elapsed_ns * 1e-9, values[i])
+        flags[i] = _step(settings, out, mean, cov, fit, work, elapsed_ns * 1e-9, values[i], times[i])
         time_ns = times[i]
     out[TIME_HIGH] = time_ns >> 32
     out[TIME_LOW] = time_ns & 0xFFFFFFFF
@@ -150,7 +150,7 @@ def merge_and_run(config: np.ndarray, ints: np.ndarray, floats: np.ndarray, role
 
 
 @njit(inline='always')
-def _step(s, st, mean, cov, fit, work, dt, sample):
+def _step(s, st, mean, cov, fit, work, dt, sample, time_ns):
     """edge/chair/estimator.py's `step` for dt > 0, in place on the packed state; returns the flags."""
     yaw_rate = sample[V_YAW_RATE]
     seat = math.isfinite(yaw_rate)  # a bridge sample has the wheels only
@@ -237,7 +237,7 @@ def _step(s, st, mean, cov, fit, work, dt, sample):
     if sample[V_HAS_MAG] == 0.0 or due > 0.0:
         st[MAG_DUE] = due
     else:
-        flags |= magnetometer(s, st, mean, cov, fit, work, sample)
+        flags |= magnetometer(s, st, mean, cov, fit, work, sample, time_ns)
     st[YAW_RATE] = yaw_rate
     st[STILL_S] = still_s
     st[ACCEL_MEAN] = accel_mean

@@ -49,7 +49,16 @@ MAG_ANCHOR = MAG_SINCE_UPDATE + 1
 MAG_TURN_GYRO = MAG_ANCHOR + 1
 MAG_TURN_S = MAG_TURN_GYRO + 1
 MAG_TURN_M = MAG_TURN_S + 1
-AXLE_WINDOW_SEAT = MAG_TURN_M + 1  # AxleScale's fields, in order
+MAP_OFFSET = MAG_TURN_M + 1  # the hub's field map where the chair is (set before each batch)
+MAP_VAR = MAP_OFFSET + 1
+FIELD_COUNT = MAP_VAR + 1  # the last reading offered to the map
+FIELD_TIME_HIGH = FIELD_COUNT + 1  # as TIME_HIGH / TIME_LOW
+FIELD_TIME_LOW = FIELD_TIME_HIGH + 1
+FIELD_X = FIELD_TIME_LOW + 1
+FIELD_Y = FIELD_X + 1
+FIELD_OFFSET = FIELD_Y + 1
+FIELD_VAR = FIELD_OFFSET + 1
+AXLE_WINDOW_SEAT = FIELD_VAR + 1  # AxleScale's fields, in order
 AXLE_WINDOW_AXLE = AXLE_WINDOW_SEAT + 1
 AXLE_WINDOW_S = AXLE_WINDOW_AXLE + 1
 AXLE_XY = AXLE_WINDOW_S + 1
@@ -159,6 +168,11 @@ def pack_state(state: ChairState) -> np.ndarray:
     vector[MAG_SINCE_READ], vector[MAG_SINCE_UPDATE] = state.mag.since_read_m, state.mag.since_update_m
     vector[MAG_ANCHOR], vector[MAG_TURN_GYRO] = state.mag.anchor_angle, state.mag.turn_gyro_rad
     vector[MAG_TURN_S], vector[MAG_TURN_M] = state.mag.turn_s, state.mag.turn_m
+    m = state.mag
+    vector[MAP_OFFSET], vector[MAP_VAR], vector[FIELD_COUNT] = m.map_offset_rad, m.map_var_rad2, m.field_count
+    vector[FIELD_TIME_HIGH], vector[FIELD_TIME_LOW] = m.field_time_ns >> 32, m.field_time_ns & 0xFFFFFFFF
+    vector[FIELD_X], vector[FIELD_Y] = m.field_x_m, m.field_y_m
+    vector[FIELD_OFFSET], vector[FIELD_VAR] = m.field_offset_rad, m.field_var_rad2
     a = state.axle
     vector[AXLE_WINDOW_SEAT:AXLE_DONE + 1] = (a.window_seat_rad, a.window_axle_rad, a.window_s, a.xy, a.xx, a.seen_rad,
                                               a.done)
@@ -172,7 +186,9 @@ def unpack_state(vector: np.ndarray) -> ChairState:
     mag = MagAid(v[MAG_FIT:MAG_FIT + 16].reshape(4, 4).copy(), float(v[MAG_DUE]), bool(v[MAG_READY]),
                  int(v[MAG_REJECTIONS]), float(v[MAG_INNOVATION]), v[MAG_STATS_AT:MAG_STATS_AT + MAG_STATS].copy(),
                  float(v[MAG_SINCE_READ]), float(v[MAG_SINCE_UPDATE]), float(v[MAG_ANCHOR]), float(v[MAG_TURN_GYRO]),
-                 float(v[MAG_TURN_S]), float(v[MAG_TURN_M]))
+                 float(v[MAG_TURN_S]), float(v[MAG_TURN_M]), float(v[MAP_OFFSET]), float(v[MAP_VAR]),
+                 int(v[FIELD_COUNT]), (int(v[FIELD_TIME_HIGH]) << 32) + int(v[FIELD_TIME_LOW]), float(v[FIELD_X]),
+                 float(v[FIELD_Y]), float(v[FIELD_OFFSET]), float(v[FIELD_VAR]))
     return ChairState(_time_ns(v), v[MEAN:MEAN + N].copy(), v[COV:COV + N * N].reshape(N, N).copy(),
                       float(v[YAW_RATE]), float(v[LEFT_BIAS]), float(v[RIGHT_BIAS]), float(v[STILL_S]),
                       float(v[ACCEL_MEAN]), tuple(float(g) for g in v[GRAVITY:GRAVITY + 3]), Flag(int(v[FLAGS])),

@@ -11,10 +11,11 @@ import math
 from numba import njit
 
 from edge.chair.estimator import (BIAS, DEG, GYRO_SCALE, HEADING, M_DIFF, M_LAST, M_RADIAL, M_RADIUS, M_STEP,
-                                  M_WEIGHT, MAG_STATS, NORTH, N)
+                                  M_WEIGHT, MAG_STATS, NORTH, N, X, Y)
 from edge.chair.kernel_math import fma, pow2, sum3, wrap
-from edge.chair.layout import (GRAVITY, LAPACK_EPS, MAG_ANCHOR, MAG_DUE, MAG_INNOVATION, MAG_READY, MAG_REJECTED,
-                               MAG_REJECTIONS, MAG_SINCE_READ, MAG_SINCE_UPDATE, MAG_STATS_AT, MAG_TURN_GYRO,
+from edge.chair.layout import (FIELD_COUNT, FIELD_OFFSET, FIELD_TIME_HIGH, FIELD_TIME_LOW, FIELD_VAR, FIELD_X,
+                               FIELD_Y, GRAVITY, LAPACK_EPS, MAG_ANCHOR, MAG_DUE, MAG_INNOVATION, MAG_READY,
+                               MAG_REJECTED, MAP_OFFSET, MAP_VAR, MAG_REJECTIONS, MAG_SINCE_READ, MAG_SINCE_UPDATE, MAG_STATS_AT, MAG_TURN_GYRO,
                                MAG_TURN_M, MAG_TURN_S, MAG_USED, S_MAG_CORRELATION_MAX, S_MAG_CORRELATION_MIN,
                                S_MAG_CORRELATION_PRIOR, S_MAG_FIT_FORGET, S_MAG_FLOOR_VAR, S_MAG_FORGET,
                                S_MAG_GATE_CHI2, S_MAG_HEADING_VAR, S_MAG_LEVEL_WEIGHT, S_MAG_MIN_POINTS,
@@ -23,7 +24,7 @@ from edge.chair.layout import (GRAVITY, LAPACK_EPS, MAG_ANCHOR, MAG_DUE, MAG_INN
 
 
 @njit(inline='always')
-def magnetometer(s, st, mean, cov, fit, work, sample):
+def magnetometer(s, st, mean, cov, fit, work, sample, time_ns):
     """A due reading: extend the hard-iron fit and the hall's statistics, measure the gyro by the
     field's turn, then learn north or correct the heading (the reference's `magnetometer`)."""
     forward, left = _level(sample, st)
@@ -33,20 +34,34 @@ def magnetometer(s, st, mean, cov, fit, work, sample):
     if not found:
         return 0
     east, north_part = forward - centre_x, left - centre_y
-    angle = math.atan2(north_part, east)  # = north - heading
+    raw_angle = math.atan2(north_part, east)  # = north - heading + the hall's disturbance here
     radius = math.sqrt(east * east + north_part * north_part)
     stats = st[MAG_STATS_AT:MAG_STATS_AT + MAG_STATS]
     if st[MAG_SINCE_READ] >= s[S_MAG_MIN_STEP]:
         _learn_disturbance(s, stats, radius, st[MAG_SINCE_READ])
         st[MAG_SINCE_READ] = 0.0
+        if st[MAG_READY] != 0.0:  # a reading for the hub's map
+            st[FIELD_COUNT] += 1.0
+            st[FIELD_TIME_HIGH] = time_ns >> 32
+            st[FIELD_TIME_LOW] = time_ns & 0xFFFFFFFF
+            st[FIELD_X] = mean[X]
+            st[FIELD_Y] = mean[Y]
+            st[FIELD_OFFSET] = wrap(raw_angle - (mean[NORTH] - mean[HEADING]))
+            st[FIELD_VAR] = cov[NORTH, NORTH] - 2.0 * cov[NORTH, HEADING] + cov[HEADING, HEADING]
     variance, correlation_m = _mag_disturbance(s, stats)
     spread_xx, spread_xy, spread_yy = _centre_spread(fit, radius, variance)
     flags = 0
     if not math.isfinite(st[MAG_ANCHOR]) or not math.isfinite(st[MAG_TURN_GYRO]):
-        _reset_turn(st, angle)
+        _reset_turn(st, raw_angle)
     elif st[MAG_TURN_S] >= s[S_MAG_TURN_S]:
-        flags = _turn_update(s, st, mean, cov, work, angle, variance, correlation_m, spread_xx, spread_xy, spread_yy)
-        _reset_turn(st, angle)
+        flags = _turn_update(s, st, mean, cov, work, raw_angle, variance, correlation_m, spread_xx, spread_xy,
+                             spread_yy)
+        _reset_turn(st, raw_angle)
+    angle = raw_angle  # north - heading: the hub's map's offset out where it knows this place better
+    mapped = _trusted(s, st[MAP_VAR]) if st[MAP_VAR] > 0.0 else math.inf
+    if mapped < variance:
+        angle = wrap(raw_angle - st[MAP_OFFSET])
+        variance = mapped
     if st[MAG_READY] == 0.0 or st[MAG_REJECTIONS] >= s[S_MAG_RECOVER_REJECTIONS]:
         # (re)learn north = angle + heading: it inherits the heading's error and all its correlations
         mean[NORTH] = angle + mean[HEADING]
@@ -148,13 +163,18 @@ def _learn_disturbance(s, stats, radius, step_m):
     stats[M_LAST] = residual
 
 
+@njit(inline='always')
+def _trusted(s, variance):
+    """The reference's `_trusted`: floored, and grown with its square beyond the trusted size."""
+    variance = max(variance, s[S_MAG_FLOOR_VAR])
+    return variance * max(1.0, variance / s[S_MAG_TRUST_VAR])
+
+
 @njit
 def _mag_disturbance(s, stats):
     """The reference's `mag_disturbance`: (heading variance, correlation length)."""
     prior_weight, weight = s[S_MAG_LEVEL_WEIGHT], stats[M_WEIGHT]
-    variance = max((stats[M_RADIAL] + prior_weight * s[S_MAG_HEADING_VAR]) / (weight + prior_weight),
-                   s[S_MAG_FLOOR_VAR])
-    variance *= max(1.0, variance / s[S_MAG_TRUST_VAR])
+    variance = _trusted(s, (stats[M_RADIAL] + prior_weight * s[S_MAG_HEADING_VAR]) / (weight + prior_weight))
     correlation = s[S_MAG_CORRELATION_PRIOR]
     if weight > 1.0 and stats[M_RADIAL] > 0.0:
         ratio = 0.5 * (stats[M_DIFF] / stats[M_RADIAL])

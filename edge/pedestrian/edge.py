@@ -105,6 +105,9 @@ class PedestrianEdge:
         self.estimator.reset_to_stand(scan.timestamp_ns, scan.x_m, scan.y_m, scan.heading_rad, scan.tilt_rad,
                                       scan.heading_sd_rad or None)
 
+    def field_map(self, field_map: Any) -> None:
+        """The hub maps a chair hall's field; a phone's magnetometer has its own checks (edge/pedestrian/magnetic.py)."""
+
     def pressure(self, reading: Any) -> None:
         """One barometer reading of this phone (another phone's is its own edge's)."""
         if reading.sensor_id and reading.sensor_id != self.sensor_id:

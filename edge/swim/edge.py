@@ -233,6 +233,9 @@ class SwimEdge:
     def pressure(self, reading: Any) -> None:
         """A pool has no floors to count."""
 
+    def field_map(self, field_map: Any) -> None:
+        """A swimmer's heading needs no map of the hall's field."""
+
     def summarise(self, summary: EdgeSummary) -> None:
         summary.swimmer = True
         summary.samples, summary.lengths = self.samples, sum(self.indices.values())

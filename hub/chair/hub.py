@@ -24,6 +24,8 @@ All times here are venue time: device timestamps plus each device's clock offset
 - Beacons: one fix per candidate pass, at its strongest sighting: close or far, each where and as widely as its
   beacon's passes of that kind have shown (hub/chair/corrections.py).
 - Fixes: an operator's or video position at a time, gated like a beacon fix.
+- The hall's magnetic field: every edge's FieldReading goes into one map of the hall
+  (hub/chair/field_map.py); every `period_s` each reading edge gets it back without its own.
 
 Honest covariance. An edge's covariance is its filter's, and after a run of video fixes it states
 a few centimetres while the chair's true error grows faster than the edge's process noise says
@@ -54,6 +56,7 @@ from typing import Any
 import numpy as np
 
 from hub.chair.corrections import CONTACT_GATE_CHI2, BeaconLevels, ContactDistance, mahalanobis2
+from hub.chair.field_map import FieldMap, FieldMapSettings
 from hub.clocks import ClockOffsets
 from hub.chair.smoother import FixedLagSmoother
 from protocol import keys, messages
@@ -89,6 +92,7 @@ class HubSettings:
     relock_after: int = 2  # video fixes in a row from one source refused with one offset: the pose is wrong
     relock_agree_m: float = 0.4  # ... their offsets this close to their mean
     relock_within_s: float = 6.0  # ... all within this long
+    field_map: FieldMapSettings = FieldMapSettings()  # the hall's magnetic field, learnt from every chair
 
     def __post_init__(self) -> None:
         unknown = set(self.corrections) - set(CORRECTIONS)
@@ -182,6 +186,8 @@ class ChairHub:
         self.beacons = {beacon.id: beacon for beacon in session.venue.beacons}
         self.beacon_levels = BeaconLevels(session.venue.beacons)
         self.contact = ContactDistance()
+        chairs = [agent.id for agent in session.agents if agent.kind is AgentKind.WHEELCHAIR]
+        self.field = FieldMap(session.venue, chairs, settings.field_map)
         ring = int(settings.lag_s * settings.pose_rate_hz) + 2
         self.agents: dict[str, AgentView] = {}
         for agent in session.agents:
@@ -228,6 +234,8 @@ class ChairHub:
             return self.on_sighting(message)
         elif name == "PositionFix":
             return self.on_fix(message)
+        elif name == "FieldReading":
+            self.field.add(message)
         return []
 
     def on_pose(self, pose: Any) -> list[Any]:
@@ -258,6 +266,8 @@ class ChairHub:
         out += [self._refined(view, entry) for entry in view.smoother.add(time_ns, xy, pose.heading_rad, covariance)]
         out += self._end_passes(view)
         out += self._close_groups(view)
+        if self.field.due(time_ns):
+            out += self.field.maps(time_ns)
         return out
 
     def _grow_extra(self, view: AgentView, time_ns: int, pose: Any) -> None:
@@ -544,6 +554,8 @@ class ChairHub:
         """Where an output message goes on the bus."""
         if messages.type_name(message) == "Correction":
             return keys.correction(self.venue, message.agent_id)
+        if messages.type_name(message) == "FieldMap":
+            return keys.field_map(self.venue, message.agent_id)
         track = "refined" if message.track == messages.Track.REFINED else "live"
         return keys.pose(self.venue, message.agent_id, track)
 

@@ -2,8 +2,8 @@
 
 Every message of the log goes, in arrival (log time) order, where it would go live: an ImuBatch
 to its chair's edge (edge/chair/edge.py) and to the hub (hub/chair/hub.py, for clock offsets),
-the edge's poses and impacts to the hub, a beacon sighting to the hub, and the hub's
-corrections back to the edge at once. So `reckon eval` scores exactly what `reckon edge` +
+the edge's poses, impacts and field readings to the hub, a beacon sighting to the hub, and the
+hub's corrections and field maps back to the edge at once. So `reckon eval` scores exactly what `reckon edge` +
 `reckon hub` compute, minus the bus's delay and reordering.
 
 `live`: at each scoring frame, the newest live pose the hub had published by then. `refined`:
@@ -69,6 +69,8 @@ def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubS
         for out in hub.on_message(message, arrival_ns):
             if messages.type_name(out) == "Correction":
                 edges[out.agent_id].correct(out)
+            elif messages.type_name(out) == "FieldMap":
+                edges[out.agent_id].field_map(out)
             elif messages.type_name(out) == "TrackIdentity":
                 if identities is not None:
                     identities.append(out)

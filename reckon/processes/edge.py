@@ -6,7 +6,8 @@ and filter, a swimmer's lengths, a phone's steps) -> what it makes on the agent'
 EstimatedPose at `pose_rate_hz` on `reckon/<venue>/<agent>/pose/edge` and an ImpactEvent at once
 on `.../event/impact`, a swimmer's SwimLength as each length ends, a phone's pose per step. The
 hub's Correction messages for this agent (`.../correction`) are taken between batches and handed to
-the edge. Each raw batch carries the venue clock at its arrival (`received_ns`: the log time in a
+the edge, and so are its maps of the hall's magnetic field (`.../field_map`, for the edge's
+FieldReading on `.../field`). Each raw batch carries the venue clock at its arrival (`received_ns`: the log time in a
 replay), from which the hub estimates the device's clock offset.
 """
 
@@ -75,7 +76,8 @@ def run_edge(config: BusConfig, session: Session, agent_id: str, source: Iterabl
     venue = session.venue.name
     summary = EdgeSummary(agent_id)
     with open_session(config) as bus, edge_publisher(bus, session.venue.name, spool, spool_limit_bytes) as publisher, \
-            Subscription(bus, keys.correction(venue, agent_id), capacity=256) as corrections, \
+            Subscription(bus, [keys.correction(venue, agent_id), keys.field_map(venue, agent_id)],
+                         capacity=256) as corrections, \
             Alive(bus, venue, wire.Role.EDGE, agent_id), \
             StatusReporter(bus, venue, agent, source, publisher) as status:
         if wait_for:
@@ -87,6 +89,8 @@ def run_edge(config: BusConfig, session: Session, agent_id: str, source: Iterabl
                 name = messages.type_name(out)
                 if name == "ImpactEvent":
                     publisher.publish(keys.impact(venue, agent_id), out)
+                elif name == "FieldReading":
+                    publisher.publish(keys.field(venue, agent_id), out)
                 elif name == "SwimLength":
                     publisher.publish(keys.length(venue, agent_id), out)
                     log.info("%s length %d: %.2f m swum in %.1f s, %d strokes", out.sensor_id, out.index,
@@ -202,7 +206,7 @@ class StatusReporter:
 
 
 def _take_corrections(subscription: Subscription, edge: Edge) -> None:
-    """Hand every Correction that has arrived to the edge (never waits)."""
+    """Hand every Correction and FieldMap that has arrived to the edge (never waits)."""
     while True:
         try:
             item = subscription.get(timeout=0)
@@ -217,3 +221,5 @@ def _take_corrections(subscription: Subscription, edge: Edge) -> None:
             continue
         if messages.type_name(message) == "Correction":
             edge.correct(message)
+        elif messages.type_name(message) == "FieldMap":
+            edge.field_map(message)

@@ -45,7 +45,7 @@ log = logging.getLogger(__name__)
 POLL_S = 0.1
 BATCH = 256  # samples taken from the FIFOs at a time
 FIFO_CAPACITY = 1024  # per input selector: what the hub holds before Zenoh pushes back on the edges
-INPUTS = ("imu/*", "beacon/*", "pose/edge", "event/impact", "event/scan", "fix", "length", "tracks/*")  # tracks: camera frames
+INPUTS = ("imu/*", "beacon/*", "pose/edge", "event/impact", "event/scan", "fix", "length", "field", "tracks/*")  # tracks: camera frames
 WARN_EVERY_S = 10.0
 SNAPSHOT_EVERY_S = 2.0  # a restarted hub re-applies at most this much of its recording
 FLUSH_EVERY_S = 0.5  # with a state file, the recording reaches the disk this often: a kill loses at most this much of it
@@ -66,6 +66,7 @@ class HubSummary:
     swims: dict[str, SwimTotals] = field(default_factory=dict)  # sensor -> its lengths so far
     walkers: dict[str, str] = field(default_factory=dict)  # pedestrian -> its map-matched poses and the last one
     beacons: dict[str, str] = field(default_factory=dict)  # a chair venue's beacon -> what its passes showed
+    field_map: str = ""  # a chair venue's map of the hall's magnetic field, once an edge sent readings
 
     def __str__(self) -> str:
         total = sum(sum(kinds.values()) for kinds in self.corrections.values())
@@ -80,6 +81,8 @@ class HubSummary:
             text += f"\n  {agent_id}: {line}"
         for beacon_id, line in sorted(self.beacons.items()):
             text += f"\n  beacon {beacon_id}: {line}"
+        if self.field_map:
+            text += f"\n  {self.field_map}"
         return text
 
 
@@ -215,6 +218,8 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
     levels = hub.chairs.beacon_levels
     summary.beacons = {beacon_id: levels.describe(beacon_id) for beacon_id in levels.beacons
                        if levels.levels[beacon_id].close_fixes + levels.levels[beacon_id].far_fixes}
+    if hub.chairs.field.readers:
+        summary.field_map = hub.chairs.field.describe()
     return summary
 
 

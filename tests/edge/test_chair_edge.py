@@ -104,3 +104,46 @@ def test_a_camber_the_venue_file_has_wrong_is_refused_and_named(games):
     (warning,) = warnings
     assert warning.startswith("chair01: the axle IMUs' turn put the seat gyro's scale at +")
     assert "chi-square gate" in warning and "camber (40.0 deg)" in warning
+
+
+def field_map(columns: int, rows: int, offset: float, variance: float, cells: int | None = None):
+    cells = columns * rows if cells is None else cells
+    return messages.new("FieldMap", timestamp_ns=0, agent_id="chair01", origin_x_m=-2.0, origin_y_m=-2.0, cell_m=2.0,
+                        columns=columns, rows=rows, offset_rad=[offset] * cells, variance_rad2=[variance] * cells)
+
+
+def test_the_hub_field_map_reaches_the_filter_and_readings_go_out(games):
+    """The edge hands the filter the hub's map where the chair is, drops it when the hub withdraws it,
+    refuses a malformed one by name, and offers its magnetometer readings to the map."""
+    path = games.path(Game(players=1, duration_s=60.0, seed=2))
+    agent = read_session(path).session.agent("chair01")
+    edge, out, warnings = ChairEdge(agent), [], []
+    stream = [b for b in mcap_source(path, "chair01", 0.0, threading.Event()) if messages.type_name(b) == "ImuBatch"]
+    third = len(stream) // 3
+    for k, batch in enumerate(stream):
+        if k == third:
+            edge.field_map(field_map(16, 10, 0.1, 4e-3))
+            edge.field_map(field_map(16, 10, 0.5, 4e-3, cells=12))  # refused: the previous one holds
+            warnings += edge.warnings()
+        if k == third + 30:
+            mag = edge.state.mag
+            assert (mag.map_offset_rad, mag.map_var_rad2) == (pytest.approx(0.1), pytest.approx(4e-3))
+            edge.field_map(field_map(0, 0, 0.0, 0.0))  # withdrawn
+        if k == third + 60:
+            assert edge.state.mag.map_var_rad2 == 0.0
+        out += edge.push(batch)
+    out += edge.flush()
+    (warning,) = warnings
+    assert warning.startswith("chair01: field map refused (1 so far): 16 x 10 cells of 2.0 m with 12 offsets")
+    readings = [m for m in out if messages.type_name(m) == "FieldReading"]
+    summary = EdgeSummary("chair01")
+    edge.summarise(summary)
+    assert summary.field_maps == 2 and summary.field_readings >= len(readings) > 20
+    assert "field readings out and 2 field maps in" in str(summary)
+    times = [r.timestamp_ns for r in readings]
+    assert times == sorted(times) and all(abs(r.offset_rad) < 3.15 and r.variance_rad2 > 0.0 for r in readings)
+    poses = [m for m in out if messages.type_name(m) == "EstimatedPose"]
+    pose_times = np.array([p.timestamp_ns for p in poses])
+    for r in readings:  # where the filter had the chair then
+        p = poses[int(np.argmin(np.abs(pose_times - r.timestamp_ns)))]
+        assert np.hypot(p.x_m - r.x_m, p.y_m - r.y_m) < 0.5

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from edge.chair.estimator import ChairSample, ChairSettings, ChairState, Flag, N, start, step
+from edge.chair.estimator import DEG, ChairSample, ChairSettings, ChairState, Flag, N, start, step
 from edge.chair.kernel import (COV, FLAGS, GRAVITY, MEAN, SAMPLE_WIDTH, STATE_SIZE, V_ACCEL, V_HAS_MAG, V_LEFT, V_MAG,
                                V_RIGHT, V_WHEEL_YAW, V_YAW_RATE, pack_samples, pack_settings, pack_state, run_batch,
                                run_poses, step_batch, unpack_state)
@@ -103,9 +103,11 @@ def assert_same_state(kernel: ChairState, expected: ChairState) -> None:
     np.testing.assert_allclose(kernel.mag.due_s, expected.mag.due_s, **close)
     np.testing.assert_allclose(kernel.mag.innovation_deg, expected.mag.innovation_deg, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(kernel.mag.stats, expected.mag.stats, **close)
-    for name in ("since_read_m", "since_update_m", "anchor_angle", "turn_gyro_rad", "turn_s", "turn_m"):
+    for name in ("since_read_m", "since_update_m", "anchor_angle", "turn_gyro_rad", "turn_s", "turn_m", "map_offset_rad",
+                 "map_var_rad2", "field_x_m", "field_y_m", "field_offset_rad", "field_var_rad2"):
         np.testing.assert_allclose(getattr(kernel.mag, name), getattr(expected.mag, name), err_msg=name, equal_nan=True,
                                    **close)
+    assert (kernel.mag.field_count, kernel.mag.field_time_ns) == (expected.mag.field_count, expected.mag.field_time_ns)
 
 
 @pytest.mark.parametrize("overrides", [{}, STRICT_MAG], ids=["default", "strict-mag"])
@@ -129,6 +131,24 @@ def test_kernel_steps_as_the_reference_does(chairs, overrides):
     assert seen & Flag.MAG_USED
     if overrides:
         assert seen & Flag.MAG_REJECTED and relearned_north > 0
+
+
+def test_kernel_reads_the_hub_field_map_as_the_reference_does(chairs):
+    """With the hub's map set (an offset out of every reading, a smaller variance left), the two still
+    agree, and both offer the same readings to the map."""
+    offered = 0
+    for chair, first, samples in chairs:
+        mapped = replace(first, mag=replace(first.mag, map_offset_rad=0.12, map_var_rad2=(2.5 * DEG) ** 2))
+        expected, expected_flags, _ = reference(chair, mapped, samples)
+        state, flags = step_batch(chair, mapped, samples)
+        np.testing.assert_array_equal(flags, expected_flags)
+        assert_same_state(state, expected)
+        unmapped, _ = step_batch(chair, first, samples)
+        assert not np.allclose(unmapped.mean, state.mean)  # the map did change the filter
+        offered += expected.mag.field_count
+        if expected.mag.field_count:
+            assert expected.mag.field_time_ns <= expected.time_ns and expected.mag.field_var_rad2 > 0.0
+    assert offered > 0
 
 
 @settings(max_examples=30, deadline=None)

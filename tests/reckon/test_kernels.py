@@ -25,13 +25,14 @@ EDGE_RSS_LIMIT_MB = 100  # issue 18's bound for an edge process
 
 
 def outputs(game, agent, kernels) -> list[tuple]:
-    """Every pose and impact of one chair's edge over the game, as plain numbers."""
+    """Every pose, impact and field reading of one chair's edge over the game, as plain numbers."""
     edge = ChairEdge(agent, kernels=kernels)
     batches = [m for _, topic, m in LogMessages(game, lambda topic, name: name == "ImuBatch"
                                                 and keys.parse(topic)[1] == agent.id)]
     made = [out for batch in batches for out in edge.push(batch)] + edge.flush()
     return [(out.DESCRIPTOR.name, out.timestamp_ns,
              *((out.x_m, out.y_m, out.heading_rad, *out.covariance) if out.DESCRIPTOR.name == "EstimatedPose"
+               else (out.x_m, out.y_m, out.offset_rad, out.variance_rad2) if out.DESCRIPTOR.name == "FieldReading"
                else (out.peak_g, out.forward_g, out.left_g)))
             for out in made]
 

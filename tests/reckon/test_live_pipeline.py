@@ -13,6 +13,7 @@ from collections import defaultdict
 import numpy as np
 import pytest
 
+from hub.chair.field_map import FieldMapSettings
 from hub.chair.hub import HubSettings
 from protocol import messages
 from protocol import bus as wire
@@ -173,3 +174,28 @@ def test_a_device_that_drops_out_and_returns_resumes_without_a_restart(game, dat
     start = session.agents[0]
     assert np.hypot(after[0, 1] - start.start_x_m, after[0, 2] - start.start_y_m) > 0.5
     assert np.hypot(after[0, 1] - before[-1, 1], after[0, 2] - before[-1, 2]) < 6 * 5.0  # at most sprint speed
+
+
+def test_the_hall_field_map_goes_round_edges_and_hub(game, data, free_endpoint):
+    """Each edge's magnetometer readings reach the hub's field map, and the map comes back to each
+    edge on its own key (sent every second here, and whatever it predicts: the map's own check
+    needs more than a 30 s game, tests/hub/test_field_map.py holds that)."""
+    endpoint = free_endpoint()
+    session = data.session
+    eager = FieldMapSettings(check_min=0, explained_share=1e9, period_s=1.0)
+    hub = Hub(endpoint, session, settings=HubSettings(field_map=eager))
+    assert hub.ready.wait(WAIT_S)
+    threads, edges = start_edges(endpoint, session, game, wait_for=1, speed=4.0)
+    join(threads)
+    summary = hub.finish()
+    sent = defaultdict(int)
+    for out in hub.outputs:
+        if messages.type_name(out) == "FieldMap":
+            sent[out.agent_id] += 1
+            assert out.columns * out.rows == len(out.offset_rad) == len(out.variance_rad2) > 0
+    assert summary.field_map.startswith(f"field map: {len(session.agents)} chairs")
+    for agent in session.agents:
+        assert edges[agent.id].field_readings >= 1  # north is learnt some 20 s in (the hard-iron fit)
+        # every map sent was taken, but for those sent as its replay ended
+        assert sent[agent.id] >= 1 and sent[agent.id] - 2 <= edges[agent.id].field_maps <= sent[agent.id]
+    assert sum(edge.field_maps for edge in edges.values()) >= len(session.agents)
