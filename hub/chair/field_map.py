@@ -46,6 +46,18 @@ class FieldMapSettings:
     explained_share: float = 0.7  # sent while its predictions' mean squared residual is below this share of no map's
     period_s: float = 5.0  # a new map this often (venue time)
 
+    def __post_init__(self) -> None:
+        positive = ("cell_m", "reading_sd_deg", "max_offset_deg", "explained_share", "period_s")
+        for name in positive:
+            if not 0.0 < getattr(self, name) < math.inf:  # refuses NaN too
+                raise ValueError(f"field map setting {name} = {getattr(self, name)}: must be finite and > 0")
+        for name in ("chair_memory", "check_memory"):
+            if not 1.0 <= getattr(self, name) < math.inf:
+                raise ValueError(f"field map setting {name} = {getattr(self, name)}: must be finite and >= 1 (readings)")
+        if not (0.0 <= self.margin_m < math.inf and self.min_chairs >= 1 and self.check_min >= 0):
+            raise ValueError(f"field map settings margin_m = {self.margin_m} (finite, >= 0), min_chairs = "
+                             f"{self.min_chairs} (>= 1), check_min = {self.check_min} (>= 0)")
+
 
 class FieldMap:
     """`add(reading)`, then `maps(time_ns)` (a FieldMap message per reading agent) when `due(time_ns)`."""

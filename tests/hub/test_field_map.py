@@ -125,3 +125,11 @@ def test_maps_go_out_every_period_to_the_chairs_that_read():
     assert not field.due(4 * 10**9) and field.due(5 * 10**9)
     assert len(field.maps(5 * 10**9)) == len(CHAIRS)
     assert not field.due(9 * 10**9) and field.due(10 * 10**9)
+
+
+@pytest.mark.parametrize("bad", [dict(cell_m=0.0), dict(period_s=math.nan), dict(chair_memory=0.5), dict(min_chairs=0),
+                                 dict(margin_m=-1.0)])
+def test_a_wrong_setting_is_refused_by_name(bad):
+    (name, value), = bad.items()
+    with pytest.raises(ValueError, match=f"{name} = {value}"):
+        FieldMapSettings(**bad)
