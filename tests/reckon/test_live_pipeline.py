@@ -196,6 +196,7 @@ def test_the_hall_field_map_goes_round_edges_and_hub(game, data, free_endpoint):
     assert summary.field_map.startswith(f"field map: {len(session.agents)} chairs")
     for agent in session.agents:
         assert edges[agent.id].field_readings >= 1  # north is learnt some 20 s in (the hard-iron fit)
-        # every map sent was taken, but for those sent as its replay ended
-        assert sent[agent.id] >= 1 and sent[agent.id] - 2 <= edges[agent.id].field_maps <= sent[agent.id]
-    assert sum(edge.field_maps for edge in edges.values()) >= len(session.agents)
+        # every map sent was taken, but for those sent as its replay ended (a chair whose first
+        # reading came in the game's last second may have had none)
+        assert sent[agent.id] - 2 <= edges[agent.id].field_maps <= sent[agent.id]
+    assert sum(sent.values()) >= len(session.agents) and sum(e.field_maps for e in edges.values()) >= len(session.agents)
