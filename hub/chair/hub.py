@@ -1,9 +1,9 @@
 """The hub's computation for a venue of chairs, without I/O: messages in, messages out.
 
-In: every agent's raw ImuBatch (only for clock offsets), EstimatedPose from its edge,
-ImpactEvent, BeaconSighting, and PositionFix from an operator or a video tracker.
+In: every agent's raw ImuBatch (only for clock offsets), EstimatedPose and FieldReading from its
+edge, ImpactEvent, BeaconSighting, and PositionFix from an operator or a video tracker.
 Out: a live corrected pose per agent as each edge pose arrives, a refined pose once it is `lag_s`
-old (hub/chair/smoother.py), and Correction messages for the edges.
+old (hub/chair/smoother.py), and Correction and FieldMap messages for the edges.
 
 Why corrections go back to the edges: the edge holds the whole state (heading, gyro bias, wheel
 scale), so a position measurement applied there also corrects the heading error that caused the
