@@ -122,14 +122,16 @@ class FieldMap:
 
     # -- the map -------------------------------------------------------------------------------
 
-    def _weights(self) -> tuple[np.ndarray, np.ndarray]:
-        """(weight, weight x mean) per chair and cell: each chair's mean with its own offset out,
-        weighted by its precision (its heading's variance, the readings' scatter over their number)."""
-        seen = self.count > 0.0
-        count = np.where(seen, self.count, 1.0)
-        mean = self.total / count - self.chair_offset[:, None]
-        variance = self.variance / count + (self.settings.reading_sd_deg * DEG) ** 2 / count
-        weight = np.where(seen, 1.0 / variance, 0.0)
+    def _weights(self, cells: slice | int = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        """(weight, weight x mean) per chair of `cells` (all: chairs x cells): each chair's mean with its
+        own offset out, weighted by its precision (its heading's variance, the readings' scatter over
+        their number); 0 where a chair has not read the cell."""
+        count, total, variance = self.count[:, cells], self.total[:, cells], self.variance[:, cells]
+        seen = count > 0.0
+        count = np.where(seen, count, 1.0)
+        offset = self.chair_offset if isinstance(cells, int) else self.chair_offset[:, None]
+        mean = total / count - offset
+        weight = np.where(seen, 1.0 / (variance / count + (self.settings.reading_sd_deg * DEG) ** 2 / count), 0.0)
         return weight, weight * mean
 
     def _cell_without(self, agent: int, cell: int) -> tuple[float, float] | None:
@@ -138,11 +140,9 @@ class FieldMap:
         seen[agent] = False
         if int(seen.sum()) < self.settings.min_chairs:
             return None
-        count = self.count[seen, cell]
-        mean = self.total[seen, cell] / count - self.chair_offset[seen]
-        weight = 1.0 / (self.variance[seen, cell] / count + (self.settings.reading_sd_deg * DEG) ** 2 / count)
-        total = float(weight.sum())
-        return float((weight * mean).sum()) / total, 1.0 / total
+        weight, weighted = self._weights(cell)
+        total = float(weight[seen].sum())
+        return float(weighted[seen].sum()) / total, 1.0 / total
 
     def due(self, time_ns: int) -> bool:
         if self.next_ns is None:

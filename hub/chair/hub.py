@@ -357,14 +357,15 @@ class ChairHub:
             then = view.pose_bridged(ended.peak_ns) if covariance is not None else None
             if then is not None:
                 point, covariance, _ = self.beacon_levels.fix(beacon_id, then[0], then[1], covariance)
-                out += self._absolute(view, ended.peak_ns, point, covariance, Kind.BEACON, beacon_id)
+                out += self._absolute(view, ended.peak_ns, point, covariance, Kind.BEACON, beacon_id, then)
         while view.fixes and view.fixes[0][0] <= view.latest_ns:
             out += self._absolute(view, *view.fixes.popleft())
         return out
 
     def _absolute(self, view: AgentView, time_ns: int, xy: np.ndarray, covariance: np.ndarray, kind: Kind,
-                  source: str) -> list[Any]:
-        then = view.pose_bridged(time_ns)
+                  source: str, then: tuple[np.ndarray, np.ndarray] | None = None) -> list[Any]:
+        """A fix at `time_ns` gated against the pose then (`then`, if the caller has it already)."""
+        then = view.pose_bridged(time_ns) if then is None else then
         if then is None:
             return []
         shift = xy - then[0]
