@@ -43,7 +43,7 @@ class ResultRow:
     team_curve_m: np.ndarray  # team-mean error per frame (first run for random fixes)
     x_m: np.ndarray  # (agents, frames) estimate of the first run
     y_m: np.ndarray
-    nees: float | None = None  # ours live: median over frames of the position NEES (honest: 1.39)
+    nees: float | None = None  # ours, either track: median over frames of the position NEES (honest: 1.39)
 
 
 @dataclass

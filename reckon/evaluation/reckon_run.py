@@ -108,8 +108,11 @@ def run_reckon(session: Session, inputs: list[tuple[int, Any]], frame_ns: np.nda
     ids = [agent.id for agent in session.agents]
     live_rows = np.array([_newest_at(live.get(agent_id), frame_ns) for agent_id in ids])  # (agents, frames, 5)
     refined_xy = [_interpolated(refined.get(agent_id), frame_ns) for agent_id in ids]
+    # The refined pose's covariance: the one stated by the refined pose at or before each frame.
+    refined_covariance = np.array([_newest_at(refined.get(agent_id), frame_ns) for agent_id in ids])[:, :, 2:]
     return (ReckonEstimate(live_rows[:, :, 0], live_rows[:, :, 1], applied, live_rows[:, :, 2:]),
-            ReckonEstimate(np.array([xy[0] for xy in refined_xy]), np.array([xy[1] for xy in refined_xy]), applied))
+            ReckonEstimate(np.array([xy[0] for xy in refined_xy]), np.array([xy[1] for xy in refined_xy]), applied,
+                           refined_covariance))
 
 
 def without_magnetometer(inputs: list[tuple[int, Any]]) -> list[tuple[int, Any]]:
