@@ -41,6 +41,9 @@ class EdgeSummary:
     pedestrian: bool = False  # a phone: `poses` are its steps
     spooled: int = 0  # messages left in the spool at the end (replayed on the next start)
     spool_refused: int = 0  # messages lost because the spool was full
+    raw_sent: int = 0  # raw batches published (while someone subscribed: reckon/processes/raw_feed.py)
+    raw_unasked: int = 0  # ... not published: nobody subscribed
+    clock_samples: int = 0  # ClockSample messages out
 
     def __str__(self) -> str:
         if self.swimmer:
@@ -54,7 +57,11 @@ class EdgeSummary:
                 f"{self.poses} poses and {self.impacts} impacts out, {self.corrections} corrections applied, "
                 f"{self.field_readings} field readings out and {self.field_maps} field maps in "
                 f"({self.extrapolated} samples with a wheel extrapolated, {self.wheel_overrun} behind the wheel "
-                f"history, {self.bridged} bridging a silent seat){self._calibration()}; last pose {pose}")
+                f"history, {self.bridged} bridging a silent seat){self._calibration()}; {self._raw()}; last pose {pose}")
+
+    def _raw(self) -> str:
+        return (f"raw batches {self.raw_sent} published, {self.raw_unasked} not (nobody subscribed), "
+                f"{self.clock_samples} clock samples")
 
     def _calibration(self) -> str:
         if self.wheel_clocks_ms is None:

@@ -25,6 +25,12 @@ def imu(venue: str, agent: str, sensor: str) -> str:
     return f"{ROOT}/{venue}/{agent}/imu/{sensor}"
 
 
+def clock(venue: str, agent: str, sensor: str) -> str:
+    """A device's clock against the edge host's (ClockSample): what the hub's clock offsets need of
+    the raw stream, which goes out only while someone subscribes to it."""
+    return f"{ROOT}/{venue}/{agent}/clock/{sensor}"
+
+
 def beacon(venue: str, agent: str, sensor: str) -> str:
     return f"{ROOT}/{venue}/{agent}/beacon/{sensor}"
 

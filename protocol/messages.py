@@ -85,6 +85,17 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("mag_gauss", "float", True),  # empty when the device has no magnetometer
         ("received_ns", "int64", False),  # receiver's (venue host) clock at arrival; 0 = unknown
     ],
+    # Edge -> hub: one pair of a sensor's clocks per second, the batch whose (received_ns - timestamp_ns)
+    # was the smallest in that second: timestamp_ns the device time of its last sample, received_ns the
+    # edge host's clock at its arrival. The hub's clock offsets (hub/clocks.py) keep the lower envelope
+    # of that difference, so this one pair a second gives them what every batch would.
+    "ClockSample": [
+        ("schema_version", "uint32", False),
+        ("timestamp_ns", "int64", False),
+        ("agent_id", "string", False),
+        ("sensor_id", "string", False),
+        ("received_ns", "int64", False),
+    ],
     "BeaconSighting": [
         ("schema_version", "uint32", False),
         ("timestamp_ns", "int64", False),
@@ -353,6 +364,7 @@ CLASSES: dict[str, Any] = {
 }
 ImuBatch = CLASSES["ImuBatch"]
 BeaconSighting = CLASSES["BeaconSighting"]
+ClockSample = CLASSES["ClockSample"]
 TruthPose = CLASSES["TruthPose"]
 EstimatedPose = CLASSES["EstimatedPose"]
 ImpactEvent = CLASSES["ImpactEvent"]

@@ -1,7 +1,8 @@
 """The hub's computation for a venue of chairs, without I/O: messages in, messages out.
 
-In: every agent's raw ImuBatch (only for clock offsets), EstimatedPose and FieldReading from its
-edge, ImpactEvent, BeaconSighting, and PositionFix from an operator or a video tracker.
+In: every agent's ClockSample (or raw ImuBatch, from a recording: only for clock offsets),
+EstimatedPose and FieldReading from its edge, ImpactEvent, BeaconSighting, and PositionFix from an
+operator or a video tracker.
 Out: a live corrected pose per agent as each edge pose arrives, a refined pose once it is `lag_s`
 old (hub/chair/smoother.py), and Correction and FieldMap messages for the edges.
 
@@ -221,7 +222,10 @@ class ChairHub:
             return []
         view.arrival_ns = arrival_ns
         self.newest_arrival_ns = max(self.newest_arrival_ns, arrival_ns)
-        if name == "ImuBatch":
+        if name == "ClockSample":
+            self.clocks.observe(message.sensor_id, message.timestamp_ns, message.received_ns)
+            return []
+        if name == "ImuBatch":  # a recording's or a replay's raw batches (a live edge sends ClockSample)
             if message.received_ns and len(message.sample_offset_ns):
                 self.clocks.observe(message.sensor_id, message.timestamp_ns + message.sample_offset_ns[-1],
                                     message.received_ns)

@@ -113,6 +113,8 @@ class IdentityEngine:
             return self.on_frame(message)
         if name == "ImuBatch":
             self.on_imu(message)
+        elif name == "ClockSample":
+            self.clocks.observe(message.sensor_id, message.timestamp_ns, message.received_ns)
         elif name == "EstimatedPose":  # the hub passes only its edges' poses (pose/edge), never its own
             self.on_edge_pose(message)
         return []

@@ -31,7 +31,7 @@ START_ATTEMPTS = 3
 EXIT_TIMEOUT_S = 300.0
 POLL_S = 0.05  # how often the processes' peak RSS is read, and what arrived here is taken, while they run
 SUBSCRIPTION_CAPACITY = 16384  # samples between two takes: ~1,300 a second arrive with 10 chairs
-HUB_INPUTS = ("imu", "beacon", "pose/edge", "event", "fix")
+HUB_INPUTS = ("imu", "clock", "beacon", "pose/edge", "event", "fix", "field")
 
 
 @dataclass

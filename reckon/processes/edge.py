@@ -28,6 +28,7 @@ from protocol import bus as wire
 from protocol import keys, messages
 from protocol.session import Agent, AgentKind, Session
 from protocol.session_log import session_description
+from reckon.processes.raw_feed import RawFeed
 from reckon.transport.bus import (Alive, BusConfig, BusSession, Publisher, Subscription, flush, open_session,
                                   wait_for_peers)
 from reckon.transport.spool import DEFAULT_LIMIT_BYTES, SpooledPublisher, edge_publisher
@@ -79,7 +80,8 @@ def run_edge(config: BusConfig, session: Session, agent_id: str, source: Iterabl
             Subscription(bus, [keys.correction(venue, agent_id), keys.field_map(venue, agent_id)],
                          capacity=256) as corrections, \
             Alive(bus, venue, wire.Role.EDGE, agent_id), \
-            StatusReporter(bus, venue, agent, source, publisher) as status:
+            StatusReporter(bus, venue, agent, source, publisher) as status, \
+            RawFeed(bus, publisher, venue, agent_id) as raw:
         if wait_for:
             wait_for_peers(bus, [wire.alive_selector(venue, wire.Role.HUB), wire.alive_selector(venue, wire.Role.RECORDER)],
                            wait_for, wait_timeout_s)
@@ -106,7 +108,7 @@ def run_edge(config: BusConfig, session: Session, agent_id: str, source: Iterabl
             if message.DESCRIPTOR.name == "ImuBatch":
                 # duplicates out, late batches re-ordered, clock jumps re-anchored (edge/health.py)
                 for batch in status.push(message):
-                    publisher.publish(keys.imu(venue, agent_id, batch.sensor_id), batch)  # before the estimator
+                    raw.push(batch)  # before the estimator
                     publish(edge.push(batch))
             elif message.DESCRIPTOR.name == "StandScan":
                 publisher.publish(keys.scan(venue, agent_id), message)  # refused ones too, with their reason
@@ -120,8 +122,9 @@ def run_edge(config: BusConfig, session: Session, agent_id: str, source: Iterabl
                 edge.summarise(summary)
                 progress(summary)
         for batch in status.flush():
-            publisher.publish(keys.imu(venue, agent_id, batch.sensor_id), batch)
+            raw.push(batch)
             publish(edge.push(batch))
+        raw.flush()
         publish(edge.flush())
         status.report()  # the last word on every sensor, before the flush below
         if isinstance(publisher, SpooledPublisher):
@@ -129,6 +132,7 @@ def run_edge(config: BusConfig, session: Session, agent_id: str, source: Iterabl
             summary.spooled, summary.spool_refused = publisher.spooled, publisher.refused
         flush(bus, wire.alive_selector(venue), FLUSH_TIMEOUT_S)  # closing drops what is still queued
     edge.summarise(summary)
+    summary.raw_sent, summary.raw_unasked, summary.clock_samples = raw.sent, raw.unasked, raw.clock_samples
     return summary
 
 

@@ -45,7 +45,11 @@ log = logging.getLogger(__name__)
 POLL_S = 0.1
 BATCH = 256  # samples taken from the FIFOs at a time
 FIFO_CAPACITY = 1024  # per input selector: what the hub holds before Zenoh pushes back on the edges
-INPUTS = ("imu/*", "beacon/*", "pose/edge", "event/impact", "event/scan", "fix", "length", "field", "tracks/*")  # tracks: camera frames
+# Raw IMU (`imu/*`) is not among them: the clocks come from `clock/*`, and the edges publish raw batches
+# only while someone subscribes (reckon/processes/raw_feed.py). The hub subscribes once a camera is on:
+# the identity engine reads the IMU.
+INPUTS = ("clock/*", "beacon/*", "pose/edge", "event/impact", "event/scan", "fix", "length", "field", "tracks/*")  # tracks: camera frames
+RAW_IMU = "imu/*"
 WARN_EVERY_S = 10.0
 SNAPSHOT_EVERY_S = 2.0  # a restarted hub re-applies at most this much of its recording
 FLUSH_EVERY_S = 0.5  # with a state file, the recording reaches the disk this often: a kill loses at most this much of it
@@ -144,6 +148,16 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
         # order its samples were published, whatever their streams: as they arrived, not stream by stream.
         subscription = stack.enter_context(PolledSubscription(bus, [keys.all_agents(venue, stream) for stream in INPUTS],
                                                               fifo_capacity=FIFO_CAPACITY, by_source_time=True))
+        asked_raw = False
+
+        def ask_raw() -> None:
+            nonlocal asked_raw
+            if not asked_raw and getattr(hub, "identity", None) is not None:
+                subscription.add(keys.all_agents(venue, RAW_IMU))
+                asked_raw = True
+                log.info("a camera is on: subscribed to the edges' raw IMU for identity")
+
+        ask_raw()  # a hub restored with its identity engine
         stack.enter_context(Alive(bus, venue, wire.Role.HUB))
         if on_bus:
             stack.enter_context(on_bus(bus))
@@ -193,6 +207,8 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
                             on_output(message)
                         continue
                     emit(hub.on_message(message, item.received_ns))
+                    if not asked_raw and message.DESCRIPTOR.name == "CameraFrame":
+                        ask_raw()
                 except (InputError, ValueError) as error:
                     summary.skipped += 1
                     skipped_since += 1

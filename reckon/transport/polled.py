@@ -72,7 +72,17 @@ class PolledSubscription:
         self._pending: deque[Received] = deque()  # taken from the FIFOs, not yet handed out
         self._run: dict[int, int] = {}  # per FIFO (by id): samples taken in a row without finding it empty
         self._last_data = -math.inf  # monotonic time of the last sweep that found something
+        self._session = session
         self._subscribers, self._handlers = declare_fifos(session, selectors, fifo_capacity)
+
+    def add(self, selector: str) -> None:
+        """Subscribe to one more selector (the hub asks for raw IMU once a camera is on)."""
+        if self._undeclared_at is not None:
+            return
+        subscribers, handlers = declare_fifos(self._session, [selector], self._fifo_capacity)
+        self._subscribers += subscribers
+        self._handlers += handlers
+        self.selector += ", " + selector
 
     def _sweep(self, limit: int) -> list[Received]:
         """What the FIFOs hold now, up to about `limit` samples."""

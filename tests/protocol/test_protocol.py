@@ -61,6 +61,7 @@ def test_every_message_round_trips_with_schema_version():
         "StandScan": dict(timestamp_ns=13, agent_id="walker1", sensor_id="phone", stand_id="lobby", x_m=3.3,
                           y_m=33.55, floor=1, heading_rad=-1.57, tilt_rad=0.0, payload="RK1|...", accepted=False,
                           reason="integrity code does not match"),
+        "ClockSample": dict(timestamp_ns=15, agent_id="a", sensor_id="s", received_ns=1_700_000_000_000_000_000),
         "DeviceStatus": dict(timestamp_ns=14, agent_id="a", sensor_id="s", connected=True, battery_pct=-1.0,
                              last_sample_age_s=0.02, samples=2000, gaps=1, duplicates=2, out_of_order=0,
                              clock_jumps=1, saturated=3, reconnects=1, spooled=0, flags=["saturated"]),

@@ -116,6 +116,11 @@ def batch(agent: str, sequence: int = 0):
     return messages.imu_batch(agent, f"{agent}-seat", sequence, times, np.zeros((3, 3)), np.zeros((3, 3)), None)
 
 
+def clock_sample(agent: str, sequence: int):
+    return messages.new("ClockSample", timestamp_ns=sequence + 1, agent_id=agent, sensor_id=f"{agent}-seat",
+                        received_ns=1_700_000_000_000_000_000 + sequence)
+
+
 def correction(agent: str, dx_m: float):
     return messages.new("Correction", timestamp_ns=1, agent_id=agent, dx_m=dx_m)
 
@@ -199,17 +204,17 @@ def run_two_hubs(tmp_path: Path, hub_router: dict[str, Venues], edge_router: dic
         with open_session(router.client(venue, "edge-chair1")) as bus, Publisher(bus) as edge, \
                 Alive(bus, venue, wire.Role.EDGE, "chair1"):
             wait_for_peers(bus, wire.alive_selector(venue, wire.Role.HUB), 1, WAIT_S)
-            for sequence in range(counts[venue]):
-                edge.publish(keys.imu(venue, "chair1", "chair1-seat"), batch("chair1", sequence))
+            for sequence in range(counts[venue]):  # the clock samples: an input of every hub (raw IMU is asked for)
+                edge.publish(keys.clock(venue, "chair1", "chair1-seat"), clock_sample("chair1", sequence))
             assert len(flush(bus, wire.alive_selector(venue, wire.Role.HUB), WAIT_S)) == 1
     stop.set()
     for thread, _ in hubs.values():
         thread.join(WAIT_S)
         assert not thread.is_alive()
     for venue, (_, output) in hubs.items():
-        log = LogMessages(output, wanted=lambda topic, name: name == "ImuBatch")
-        topics = [(topic, message.sequence) for _, topic, message in log]
-        assert topics == [(f"reckon/{venue}/chair1/imu/chair1-seat", sequence) for sequence in range(counts[venue])]
+        log = LogMessages(output, wanted=lambda topic, name: name == "ClockSample")
+        topics = [(topic, message.timestamp_ns) for _, topic, message in log]
+        assert topics == [(f"reckon/{venue}/chair1/clock/chair1-seat", sequence + 1) for sequence in range(counts[venue])]
 
 
 def test_two_hubs_of_two_venues_through_one_router_each_get_only_their_venue(free_endpoint, tmp_path):
