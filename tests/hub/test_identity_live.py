@@ -13,6 +13,7 @@ from reckon.transport.bus import Publisher, flush, open_session, wait_for_peers,
 from reckon.transport.config import free_endpoint
 from reckon.processes.hub import run_hub
 from support.identity_scenes import CROSSING, camera_frames, edge_poses, imu_batches, session
+from support.waits import wait_until
 
 WAIT_S = 60.0
 
@@ -42,6 +43,14 @@ def test_identified_tracks_reach_the_hub_and_become_video_corrections():
         # scene time, as when a device's link stalls. Before the hub's pose of a chair grew doubtful
         # with its age (hub/venue.py), about half the runs named a wrongly for b's track 4 after the
         # crossing: the position cue compared the tracks with poses seconds old.
+        # The hub asks for the raw IMU once a camera's frames arrive (reckon/processes/raw_feed.py): an
+        # edge sends it while the hub subscribes. So the first frame goes first, and the rest once the
+        # hub's subscription is seen here (the first frame again with it: the hub drops the repeat).
+        frame_key = keys.camera_tracks(venue, "cam1")
+        publisher.publish(frame_key, next(m for _, key, m in events if key == frame_key))
+        asked = bus.declare_publisher(next(key for _, key, _ in events if "/imu/" in key))
+        wait_until(lambda: asked.matching_status.matching, WAIT_S, "the hub to subscribe to the raw IMU")
+        asked.undeclare()
         for _, key, message in events:
             publisher.publish(key, message)
         assert flush(bus, f"reckon/{venue}/alive/{Role.HUB.value}/*", WAIT_S)
