@@ -152,7 +152,7 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
 
         def ask_raw() -> None:
             nonlocal asked_raw
-            if not asked_raw and getattr(hub, "identity", None) is not None:
+            if not asked_raw and hub.identity is not None:
                 subscription.add(keys.all_agents(venue, RAW_IMU))
                 asked_raw = True
                 log.info("a camera is on: subscribed to the edges' raw IMU for identity")

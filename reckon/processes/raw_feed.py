@@ -38,7 +38,7 @@ class RawFeed:
 
     def __init__(self, bus: BusSession, publisher: Any, venue: str, agent_id: str):
         self._bus, self._publisher, self._venue, self._agent_id = bus, publisher, venue, agent_id
-        self._watch: dict[str, tuple[zenoh.Publisher, zenoh.MatchingListener]] = {}
+        self._watch: dict[str, tuple[str, zenoh.Publisher, zenoh.MatchingListener]] = {}  # per sensor: its raw key
         self._asked: dict[str, bool] = {}  # per sensor: someone subscribes to its raw batches
         self._clocks: dict[str, _Clock] = {}
         self.sent = 0  # raw batches published
@@ -46,24 +46,24 @@ class RawFeed:
         self.clock_samples = 0
 
     def push(self, batch: Any) -> None:
-        key = keys.imu(self._venue, self._agent_id, batch.sensor_id)
-        if batch.sensor_id not in self._watch:
-            self._watch_key(batch.sensor_id, key)
+        watch = self._watch.get(batch.sensor_id) or self._watch_key(batch.sensor_id)
         if self._asked[batch.sensor_id]:
-            self._publisher.publish(key, batch)
+            self._publisher.publish(watch[0], batch)
             self.sent += 1
         else:
             self.unasked += 1
         if batch.received_ns and len(batch.sample_offset_ns):
             self._clock(batch.sensor_id, batch.timestamp_ns + batch.sample_offset_ns[-1], batch.received_ns)
 
-    def _watch_key(self, sensor_id: str, key: str) -> None:
-        """Follow whether anyone subscribes to `key`: Zenoh calls back on each change (its thread), so a
-        batch reads a flag instead of asking Zenoh's routing tables under their lock."""
+    def _watch_key(self, sensor_id: str) -> tuple:
+        """Follow whether anyone subscribes to the sensor's raw key: Zenoh calls back on each change (its
+        thread), so a batch reads a flag instead of asking Zenoh's routing tables under their lock."""
+        key = keys.imu(self._venue, self._agent_id, sensor_id)
         watch = self._bus.declare_publisher(key)
         self._asked[sensor_id] = watch.matching_status.matching
-        self._watch[sensor_id] = (watch, watch.declare_matching_listener(
+        self._watch[sensor_id] = (key, watch, watch.declare_matching_listener(
             lambda status: self._asked.__setitem__(sensor_id, status.matching)))
+        return self._watch[sensor_id]
 
     def _clock(self, sensor_id: str, device_ns: int, received_ns: int) -> None:
         clock = self._clocks.get(sensor_id)
@@ -93,7 +93,7 @@ class RawFeed:
         self._clocks.clear()
 
     def close(self) -> None:
-        for watch, listener in self._watch.values():
+        for _, watch, listener in self._watch.values():
             listener.undeclare()
             watch.undeclare()
         self._watch.clear()

@@ -187,6 +187,12 @@ class Watcher:
                 assert time.monotonic() < deadline, f"waited {WAIT_S} s for {what}"
                 self.changed.wait(0.5)
 
+    def wait_quiet(self, quiet_s: float) -> None:
+        """Until no item has come for `quiet_s` (each arrival wakes the wait)."""
+        with self.changed:
+            while self.changed.wait(quiet_s):
+                pass
+
     def close(self) -> None:
         self.tokens.undeclare()
         self.subscription.close()
@@ -229,10 +235,7 @@ def test_a_hub_killed_and_restarted_rebuilds_its_state_and_contradicts_nothing(g
         first_hub.wait(WAIT_S)
         # what the old hub published before it died may still be on its way here: a quiet spell says it
         # has all come (nothing else publishes until the restart); the restarted hub is judged against it
-        settled = -1
-        while settled != len(watcher.items):
-            settled = len(watcher.items)
-            time.sleep(QUIET_S)
+        watcher.wait_quiet(QUIET_S)
         killed_at = len(watcher.items)
         old_size = (tmp_path / "hub.mcap").stat().st_size
         checkpoint = hub_state.read(state)  # the one the restart starts from
