@@ -52,9 +52,12 @@ class VenueHub:
                     out += self.chairs.on_message(produced, arrival_ns)  # [] for an agent that is not a chair
                 else:
                     out.append(produced)
-        if name != "CameraFrame":
-            out += self.chairs.on_message(message, arrival_ns)
-            out += self.pedestrians.on_message(message)
+        if name != "CameraFrame":  # to the agent's kind: each hub ignores the other's agents
+            agent_id = message.agent_id
+            if agent_id in self.chairs.agents:
+                out += self.chairs.on_message(message, arrival_ns)
+            elif agent_id in self.pedestrians.agents:
+                out += self.pedestrians.on_message(message)
         return out
 
     def flush(self) -> list[Any]:

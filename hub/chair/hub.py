@@ -59,6 +59,7 @@ import numpy as np
 from hub.chair.corrections import CONTACT_GATE_CHI2, BeaconLevels, ContactDistance, mahalanobis2
 from hub.chair.field_map import FieldMap, FieldMapSettings
 from hub.clocks import ClockOffsets
+from hub.chair.history import PoseHistory
 from hub.chair.smoother import FixedLagSmoother
 from protocol import keys, messages
 from protocol.session import AgentKind, Mount, Session
@@ -72,6 +73,7 @@ GAP_S = 0.2  # poses further apart than this are a gap (the edge publishes at 50
 _EYE2 = np.eye(2)  # read only
 PUSH_GATE_COS = math.cos(math.radians(60.0))  # both headings' errors, and pushes off the line between centres
 PUSH_LINE_SD = math.radians(20.0)  # spread of the pushes' line about the centres' (both headings, glancing contacts)
+_EstimatedPose = messages.EstimatedPose
 STALE_MPS = 2.0  # a chair's typical speed (a 10-chair game: 150-200 m in 120 s): how a pose's doubt grows with its age
 
 
@@ -120,7 +122,7 @@ class AgentView:
     agent_id: str
     seat_id: str
     smoother: FixedLagSmoother
-    history: deque = field(default_factory=lambda: deque(maxlen=HISTORY))  # (time, xy, cov 2x2, heading) live
+    history: PoseHistory = field(default_factory=lambda: PoseHistory(HISTORY))  # live poses
     latest_ns: int | None = None  # venue time of the newest pose
     arrival_ns: int = 0  # hub clock when its last message came
     covariance: np.ndarray = field(default_factory=lambda: np.eye(3))
@@ -136,30 +138,28 @@ class AgentView:
     last_edge: tuple[int, float, float, int] | None = None  # (venue time, x, y, correction sequence) as sent
     refused_source: str = ""  # the video source whose fixes were refused in a row, most recent last
     refused: list = field(default_factory=list)  # ... as [(time, offset)]
-
-    def _last_at(self, time_ns: int) -> int | None:
-        """Index in `history` of the last pose not after `time_ns` (None: all are after it)."""
-        return next((k for k in range(len(self.history) - 1, -1, -1) if self.history[k][0] <= time_ns), None)
+    live_key: str = ""  # where its live and refined poses go (ChairHub.key_for)
+    refined_key: str = ""
 
     def pose_at(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """Live position and its covariance at `time_ns` (the last pose not after it; the first if none)."""
         if not self.history:
             return None
-        _, xy, cov, _ = self.history[self._last_at(time_ns) or 0]
-        return xy, cov
+        return self.history.position(self.history.last_at(time_ns) or 0)
 
     def heading_at(self, time_ns: int) -> float | None:
         """Live heading (rad) at `time_ns`, as pose_at picks the pose."""
-        return self.history[self._last_at(time_ns) or 0][3] if self.history else None
+        return self.history.heading(self.history.last_at(time_ns) or 0) if self.history else None
 
     def pose_bridged(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """As pose_at, but inside a gap of more than GAP_S between two poses (the link stalled) the position
         is interpolated between them and its covariance grows with the gap (the chair may have turned):
         a fix that falls in the gap is not compared with where the chair was before it."""
-        after = self._last_at(time_ns)
+        after = self.history.last_at(time_ns)
         if after is None or after + 1 >= len(self.history):
             return self.pose_at(time_ns)
-        (t0, xy0, cov0, _), (t1, xy1, cov1, _) = self.history[after], self.history[after + 1]
+        t0, t1 = self.history.time_at(after), self.history.time_at(after + 1)
+        (xy0, cov0), (xy1, cov1) = self.history.position(after), self.history.position(after + 1)
         if (t1 - t0) * 1e-9 <= GAP_S:
             return xy0, cov0
         w = (time_ns - t0) / (t1 - t0)
@@ -195,7 +195,9 @@ class ChairHub:
             if agent.kind is not AgentKind.WHEELCHAIR:
                 continue  # a swimmer's lengths need no venue-level correction (reckon/processes/hub.py shows them)
             seat = agent.sensor(Mount.SEAT)
-            self.agents[agent.id] = AgentView(agent.id, seat.id if seat else "", FixedLagSmoother(settings.lag_s, ring))
+            self.agents[agent.id] = AgentView(agent.id, seat.id if seat else "", FixedLagSmoother(settings.lag_s, ring),
+                                              live_key=keys.pose(self.venue, agent.id, "live"),
+                                              refined_key=keys.pose(self.venue, agent.id, "refined"))
         self.impacts: deque[tuple[int, str]] = deque(maxlen=256)
         self.closed_until_ns = -1
         self.newest_arrival_ns = 0
@@ -255,21 +257,29 @@ class ChairHub:
             view.pending = [(seq, shift) for seq, shift in view.pending if seq > pose.correction_sequence]
         if view.pending:
             xy = np.array([pose.x_m, pose.y_m]) + sum((shift for _, shift in view.pending), np.zeros(2))
+            x, y = float(xy[0]), float(xy[1])
         else:  # the usual case; + 0.0 as the sum above adds (it turns -0.0 into 0.0)
-            xy = np.array([pose.x_m + 0.0, pose.y_m + 0.0])
+            x, y = pose.x_m + 0.0, pose.y_m + 0.0
         # A slice of the repeated field converts to an array twice as fast as the field itself.
         covariance = np.array(pose.covariance[:], dtype=float).reshape(3, 3) if len(pose.covariance) == 9 else np.eye(3)
         view.covariance = covariance
         self._grow_extra(view, time_ns, pose)
         view.latest_ns = time_ns if view.latest_ns is None else max(view.latest_ns, time_ns)
-        honest = covariance.copy()
-        honest[:2, :2] += view.extra
-        view.history.append((time_ns, xy, covariance[:2, :2], pose.heading_rad))
+        honest = covariance.ravel().tolist()  # + extra on the position block, in floats: one small array op less
+        e00, e01, e10, e11 = view.extra.ravel().tolist()
+        honest[0] += e00
+        honest[1] += e01
+        honest[3] += e10
+        honest[4] += e11
+        view.history.append(time_ns, x, y, covariance, pose.heading_rad)
         view.poses += 1
-        out = [self._pose_message(view, time_ns, xy, pose.heading_rad, honest, messages.Track.LIVE)]
-        out += [self._refined(view, entry) for entry in view.smoother.add(time_ns, xy, pose.heading_rad, covariance)]
-        out += self._end_passes(view)
-        out += self._close_groups(view)
+        out = [self._pose_message(view, time_ns, x, y, pose.heading_rad, honest, messages.Track.LIVE)]
+        for entry in view.smoother.add(time_ns, x, y, pose.heading_rad, covariance):
+            out.append(self._refined(view, entry))
+        if view.passes or view.ended or view.fixes:
+            out += self._end_passes(view)
+        if self.impacts:
+            out += self._close_groups(view)
         if self.field.due(time_ns):
             out += self.field.maps(time_ns)
         return out
@@ -283,8 +293,9 @@ class ChairHub:
             return
         travel = math.hypot(pose.x_m - last[1], pose.y_m - last[2]) if pose.correction_sequence == last[3] else 0.0
         grow = self.settings.extra_m2_per_m * travel + self.settings.extra_m2_per_s * (time_ns - last[0]) * 1e-9
-        if grow > 0 and view.extra[0, 0] + view.extra[1, 1] < 2 * self.settings.extra_max_m2:
-            view.extra = view.extra + grow * _EYE2
+        extra = view.extra  # grown in place: every other change to it makes a new array
+        if grow > 0 and extra[0, 0] + extra[1, 1] < 2 * self.settings.extra_max_m2:
+            extra += grow * _EYE2
 
     def on_impact(self, event: Any) -> None:
         if event.peak_g < self.settings.impact_g or "collision" not in self.settings.corrections:
@@ -453,7 +464,10 @@ class ChairHub:
         else:
             self._short.pop(posed.agent_id, None)
         stale_ns = self.settings.stale_s * 1e9
-        return any(self.newest_arrival_ns - self.agents[a].arrival_ns <= stale_ns for a in self._short)
+        for agent_id in self._short:  # usually the first is live
+            if self.newest_arrival_ns - self.agents[agent_id].arrival_ns <= stale_ns:
+                return True
+        return False
 
     def _push_line(self, a: str, b: str, time_ns: int, pushes: dict[str, tuple[float, float]]
                    ) -> tuple[bool, np.ndarray | None]:
@@ -547,22 +561,28 @@ class ChairHub:
 
     def _refined(self, view: AgentView, entry: tuple) -> Any:
         time_ns, x, y, heading, covariance = entry
-        return self._pose_message(view, time_ns, (x, y), heading, covariance, messages.Track.REFINED)
+        return self._pose_message(view, time_ns, x, y, heading, covariance, messages.Track.REFINED)
 
-    def _pose_message(self, view: AgentView, time_ns: int, xy: Any, heading: float, covariance: np.ndarray,
-                      track: messages.Track) -> Any:
-        return messages.new("EstimatedPose", timestamp_ns=int(time_ns), agent_id=view.agent_id, x_m=float(xy[0]),
-                            y_m=float(xy[1]), heading_rad=float(heading), covariance=covariance.ravel().tolist(),
-                            method="reckon", track=track, correction_sequence=view.sequence)
+    def _pose_message(self, view: AgentView, time_ns: int, x: float, y: float, heading: float,
+                      covariance: list[float], track: messages.Track) -> Any:
+        return _EstimatedPose(schema_version=messages.SCHEMA_VERSION, timestamp_ns=time_ns, agent_id=view.agent_id,
+                              x_m=x, y_m=y, heading_rad=heading, covariance=covariance, method="reckon", track=track,
+                              correction_sequence=view.sequence)
 
     def key_for(self, message: Any) -> str:
         """Where an output message goes on the bus."""
-        if messages.type_name(message) == "Correction":
+        name = messages.type_name(message)
+        if name == "EstimatedPose":
+            view = self.agents.get(message.agent_id)
+            if view is not None:  # two a pose: each agent's pose keys made once
+                return view.refined_key if message.track == messages.Track.REFINED else view.live_key
+            track = "refined" if message.track == messages.Track.REFINED else "live"
+            return keys.pose(self.venue, message.agent_id, track)
+        if name == "Correction":
             return keys.correction(self.venue, message.agent_id)
-        if messages.type_name(message) == "FieldMap":
+        if name == "FieldMap":
             return keys.field_map(self.venue, message.agent_id)
-        track = "refined" if message.track == messages.Track.REFINED else "live"
-        return keys.pose(self.venue, message.agent_id, track)
+        raise ValueError(f"{name} is not an output of the chairs' hub")
 
 
 def _psd(matrix: np.ndarray) -> np.ndarray:

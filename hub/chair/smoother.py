@@ -14,72 +14,91 @@ A correction that measured an earlier time (a beacon pass, a collision found aft
 window) is placed at the pose it measured, so poses in between take the whole shift.
 
 A pose leaves as `refined` once it is `lag_s` old; the ring holds lag x pose rate entries.
+
+Storage: arrays over the entries, not an object per pose (500 chairs x 30 s at 50 Hz are 750,000
+poses: objects of a few arrays each held half a gigabyte), twice the ring's length so the held
+entries are always one contiguous slice [start, end): when `end` reaches the arrays' end the held
+part moves to the front, one copy per `max_entries` poses. A correction is then a few array
+operations over that slice instead of a Python loop over up to 1,500 poses.
 """
 
 from __future__ import annotations
 
-from collections import deque
-from dataclasses import dataclass
-
 import numpy as np
 
-
-@dataclass
-class _Entry:
-    time_ns: int
-    xy: np.ndarray  # live (filtered) position
-    heading_rad: float
-    covariance: np.ndarray  # 3 x 3 live
-    variance_before: float  # q: position variance before any correction at this pose
-    variance_after: float  # p
-    offset: np.ndarray  # delta: smoothing offset accumulated so far
+# Columns of `rows`: the live pose, its covariance, q and p of the recursion above, delta.
+X, Y, HEADING, COV, BEFORE, AFTER, OFFSET = 0, 1, 2, 3, 12, 13, 14  # COV: 9 columns; OFFSET: 2
+_COLUMNS = 16
 
 
 class FixedLagSmoother:
     def __init__(self, lag_s: float, max_entries: int):
+        if max_entries < 1:
+            raise ValueError(f"smoother max_entries {max_entries} must be at least 1")
         self.lag_ns = int(lag_s * 1e9)
-        self.entries: deque[_Entry] = deque(maxlen=max_entries)
+        self.max_entries = max_entries
+        self.time_ns = np.zeros(2 * max_entries, dtype=np.int64)
+        self.rows = np.zeros((2 * max_entries, _COLUMNS))
+        self.start = self.end = 0
 
-    def add(self, time_ns: int, xy: np.ndarray, heading_rad: float, covariance: np.ndarray) -> list[tuple]:
-        """A live pose; returns the (time_ns, x, y, heading, covariance) poses that reached the lag."""
-        variance = 0.5 * float(covariance[0, 0] + covariance[1, 1])
-        if self.entries and time_ns <= self.entries[-1].time_ns:
+    def __len__(self) -> int:
+        return self.end - self.start
+
+    def add(self, time_ns: int, x: float, y: float, heading_rad: float, covariance: np.ndarray) -> list[tuple]:
+        """A live pose (`covariance` 3 x 3); returns the (time_ns, x, y, heading, covariance 9 floats)
+        poses that reached the lag."""
+        if self.end > self.start and time_ns <= self.time_ns[self.end - 1]:
             return []  # out of order: the live pose was published, the refined track skips it
         out = []
-        if len(self.entries) == self.entries.maxlen:
-            out.append(self._emit(self.entries.popleft()))
-        self.entries.append(_Entry(time_ns, np.array(xy, dtype=float), heading_rad, covariance, variance, variance,
-                                   np.zeros(2)))
-        while self.entries and time_ns - self.entries[0].time_ns >= self.lag_ns:
-            out.append(self._emit(self.entries.popleft()))
+        if self.end - self.start == self.max_entries:
+            out.append(self._emit(self.start))
+            self.start += 1
+        if self.end == len(self.time_ns):
+            held = slice(self.start, self.end)
+            count = self.end - self.start
+            self.time_ns[:count] = self.time_ns[held]
+            self.rows[:count] = self.rows[held]
+            self.start, self.end = 0, count
+        variance = 0.5 * float(covariance[0, 0] + covariance[1, 1])
+        k = self.end
+        self.time_ns[k] = time_ns
+        self.rows[k] = (x, y, heading_rad, *covariance.flat, variance, variance, 0.0, 0.0)
+        self.end += 1
+        while self.end > self.start and time_ns - int(self.time_ns[self.start]) >= self.lag_ns:
+            out.append(self._emit(self.start))
+            self.start += 1
         return out
 
     def correct(self, measured_ns: int, shift: np.ndarray, variance_after: float) -> None:
         """A correction `shift` applied now, measured at `measured_ns`; `variance_after` at the newest pose."""
-        if not self.entries:
+        if self.end == self.start:
             return
-        newest = self.entries[-1]
-        newest.variance_after = min(variance_after, newest.variance_after)
-        running = np.array(shift, dtype=float)
-        # Poses from the measured one on shift with it: the dead reckoning since then is unchanged.
-        k = len(self.entries) - 1
-        while k > 0 and self.entries[k].time_ns > measured_ns:
-            self.entries[k].offset += running
-            k -= 1
-        self.entries[k].offset += running
-        # Earlier poses take their share of the variance accumulated up to the measured pose.
-        for j in range(k - 1, -1, -1):
-            before = self.entries[j + 1].variance_before
-            running = min(self.entries[j].variance_after / before, 1.0) * running if before > 0 else 0.0 * running
-            self.entries[j].offset += running
+        rows = self.rows[self.start:self.end]
+        rows[-1, AFTER] = min(variance_after, rows[-1, AFTER])
+        # Poses from the measured one on (the last not after it, else the oldest) shift with it: the
+        # dead reckoning since then is unchanged.
+        k = max(int(np.searchsorted(self.time_ns[self.start:self.end], measured_ns, side="right")) - 1, 0)
+        shift = np.asarray(shift, dtype=float)
+        rows[k:, OFFSET:OFFSET + 2] += shift
+        if k == 0:
+            return
+        # Earlier poses take their share of the variance accumulated up to the measured pose: pose j
+        # moves by the shift times the product of min(p_i / q_{i+1}, 1) from j to k - 1, multiplied
+        # on in that order from the shift (multiply.accumulate), as a loop from k - 1 down would.
+        before = rows[1:k + 1, BEFORE]
+        ratio = np.where(before > 0, np.minimum(rows[:k, AFTER] / np.where(before > 0, before, 1.0), 1.0), 0.0)
+        factors = np.empty((k + 1, 2))
+        factors[0] = shift
+        factors[1:] = ratio[::-1, None]
+        rows[:k, OFFSET:OFFSET + 2] += np.multiply.accumulate(factors, axis=0)[1:][::-1]
 
     def flush(self) -> list[tuple]:
         """Everything still held (end of session)."""
-        out = [self._emit(entry) for entry in self.entries]
-        self.entries.clear()
+        out = [self._emit(k) for k in range(self.start, self.end)]
+        self.start = self.end = 0
         return out
 
-    @staticmethod
-    def _emit(entry: _Entry) -> tuple:
-        xy = entry.xy + entry.offset
-        return entry.time_ns, float(xy[0]), float(xy[1]), entry.heading_rad, entry.covariance
+    def _emit(self, k: int) -> tuple:
+        row = self.rows[k]
+        return (int(self.time_ns[k]), float(row[X] + row[OFFSET]), float(row[Y] + row[OFFSET + 1]), float(row[HEADING]),
+                row[COV:COV + 9].tolist())
