@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
+import struct
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +25,7 @@ from mcap_protobuf.writer import Writer
 
 from protocol import messages
 from protocol.errors import InputError
+from protocol.log_index import IndexedLog, open_indexed
 from protocol.session import Session, load_toml, session_from_dict, to_json
 
 log = logging.getLogger(__name__)
@@ -199,6 +201,12 @@ class LogMessages:
         self.session: Session | None = None
 
     def __iter__(self) -> Iterator[tuple[int, str, Any]]:
+        if self.wanted is not None:  # some channels only: through the log's index when it is complete
+            opened = open_indexed(self.path) if self.path.exists() else None
+            if opened is not None:
+                with opened[0]:
+                    yield from self._indexed(opened[1])
+                return
         schemas: dict[int, str] = {}
         channels: dict[int, tuple[str, Any]] = {}
         for record in iter_records(self.path, self.problems):
@@ -222,6 +230,32 @@ class LogMessages:
                     self.skipped[f"{topic} (schema_version {msg.schema_version} > {messages.SCHEMA_VERSION})"] += 1
                     continue
                 yield record.log_time, topic, msg
+
+    def _indexed(self, indexed: IndexedLog) -> Iterator[tuple[int, str, Any]]:
+        description = indexed.metadata(METADATA_NAME)
+        if description is not None:
+            self.session = _parse_description(self.path, description)
+        channels: dict[int, tuple[str, Any]] = {}
+        for channel_id, channel in indexed.channels.items():
+            schema = indexed.schemas.get(channel.schema_id)
+            name = schema.name if schema is not None else ""
+            cls = messages.CLASSES.get(name.removeprefix(messages.PACKAGE + ".")) if name.startswith(messages.PACKAGE) else None
+            channels[channel_id] = (channel.topic, cls)
+            if cls is None and indexed.message_counts.get(channel_id):
+                self.skipped[channel.topic] += indexed.message_counts[channel_id]
+        chosen = {channel_id for channel_id, (topic, cls) in channels.items()
+                  if cls is not None and self.wanted(topic, cls.DESCRIPTOR.name)}
+        try:
+            for log_time, channel_id, payload in indexed.messages(chosen.__contains__):
+                topic, cls = channels[channel_id]
+                msg = cls.FromString(payload)
+                if msg.schema_version > messages.SCHEMA_VERSION:
+                    self.skipped[f"{topic} (schema_version {msg.schema_version} > {messages.SCHEMA_VERSION})"] += 1
+                    continue
+                yield log_time, topic, msg
+        except (McapError, ValueError, EOFError, OSError, struct.error) as error:
+            self.problems.append(f"{self.path}: log is damaged ({type(error).__name__}: {error}); "
+                                 "every message before the damage is kept")
 
 
 def read_session(path: Path | str) -> SessionData:
