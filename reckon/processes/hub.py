@@ -40,6 +40,7 @@ from protocol.errors import ConfigError, InputError
 from protocol.session import Session
 from protocol.session_log import LogMessages, SessionWriter
 from reckon.transport.bus import Alive, BusConfig, BusSession, PolledSubscription, Publisher, open_session
+from reckon.transport.matching import Listened
 
 log = logging.getLogger(__name__)
 POLL_S = 0.1
@@ -50,6 +51,7 @@ FIFO_CAPACITY = 1024  # per input selector: what the hub holds before Zenoh push
 # the identity engine reads the IMU.
 INPUTS = ("clock/*", "beacon/*", "pose/edge", "event/impact", "event/scan", "fix", "length", "field", "tracks/*")  # tracks: camera frames
 RAW_IMU = "imu/*"
+LIVE, REFINED = "/pose/live", "/pose/refined"  # the ends of the two pose tracks' keys (protocol.keys.pose)
 WARN_EVERY_S = 10.0
 SNAPSHOT_EVERY_S = 2.0  # a restarted hub re-applies at most this much of its recording
 FLUSH_EVERY_S = 0.5  # with a state file, the recording reaches the disk this often: a kill loses at most this much of it
@@ -64,6 +66,7 @@ class HubSummary:
     pairs: int = 0
     skipped: int = 0
     full_waits: int = 0
+    unheard: int = 0  # poses of a track nobody subscribed to: recorded, not published
     duplicates: int = 0  # inputs dropped as exact repeats (hub/dedup.py)
     stale: int = 0  # inputs dropped as older than their stream's newest
     reapplied: int = 0  # inputs re-applied from the recording after a restart
@@ -79,6 +82,8 @@ class HubSummary:
                 f"{self.duplicates} duplicates and {self.stale} stale inputs dropped")
         if self.reapplied:
             text += f", {self.reapplied} inputs re-applied after a restart"
+        if self.unheard:
+            text += f", {self.unheard} poses of a track nobody subscribed to (not published)"
         for sensor_id, swim in sorted(self.swims.items()):
             text += f"\n  {sensor_id}: {swim}"
         for agent_id, line in sorted(self.walkers.items()):
@@ -164,11 +169,24 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
         if ready is not None:
             ready.set()
 
+        # A pose track goes on the bus only while someone subscribes to it (the court view, a recorder):
+        # at 500 chairs the refined track nobody reads was half the hub's puts. Recorded either way.
+        live_heard = stack.enter_context(Listened(bus, keys.all_agents(venue, "pose/live")))
+        refined_heard = stack.enter_context(Listened(bus, keys.all_agents(venue, "pose/refined")))
+
+        def heard(key: str) -> bool:
+            if key.endswith(REFINED):
+                return refined_heard.matching
+            return live_heard.matching or not key.endswith(LIVE)  # corrections and the rest: always
+
         def emit(outputs: list[Any]) -> None:
             now = time.time_ns()
             for out in outputs:
                 key = hub.key_for(out)
-                publisher.publish(key, out)
+                if heard(key):
+                    publisher.publish(key, out)
+                else:
+                    summary.unheard += 1
                 if writer:
                     writer.write(key, out, now)
                 if on_output:

@@ -15,9 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import zenoh
-
 from protocol import keys, messages
+from reckon.transport.matching import Listened
 from reckon.transport.session import BusSession
 
 CLOCK_PERIOD_S = 1.0
@@ -33,37 +32,28 @@ class _Clock:
 
 class RawFeed:
     """`push(batch)` for every raw batch the edge takes; `flush()` at the end. `publisher` is the edge's
-    (Publisher or SpooledPublisher); `bus` declares the per-sensor Zenoh publishers whose matching
-    status says whether anyone listens (they send nothing themselves)."""
+    (Publisher or SpooledPublisher); `bus` follows, per sensor, whether anyone subscribes to its raw key."""
 
     def __init__(self, bus: BusSession, publisher: Any, venue: str, agent_id: str):
         self._bus, self._publisher, self._venue, self._agent_id = bus, publisher, venue, agent_id
-        self._watch: dict[str, tuple[str, zenoh.Publisher, zenoh.MatchingListener]] = {}  # per sensor: its raw key
-        self._asked: dict[str, bool] = {}  # per sensor: someone subscribes to its raw batches
+        self._watch: dict[str, Listened] = {}  # per sensor: its raw key and whether someone subscribes to it
         self._clocks: dict[str, _Clock] = {}
         self.sent = 0  # raw batches published
         self.unasked = 0  # raw batches nobody subscribed to: not published
         self.clock_samples = 0
 
     def push(self, batch: Any) -> None:
-        watch = self._watch.get(batch.sensor_id) or self._watch_key(batch.sensor_id)
-        if self._asked[batch.sensor_id]:
-            self._publisher.publish(watch[0], batch)
+        watch = self._watch.get(batch.sensor_id)
+        if watch is None:
+            watch = self._watch[batch.sensor_id] = Listened(self._bus, keys.imu(self._venue, self._agent_id,
+                                                                                batch.sensor_id))
+        if watch.matching:
+            self._publisher.publish(watch.key_expr, batch)
             self.sent += 1
         else:
             self.unasked += 1
         if batch.received_ns and len(batch.sample_offset_ns):
             self._clock(batch.sensor_id, batch.timestamp_ns + batch.sample_offset_ns[-1], batch.received_ns)
-
-    def _watch_key(self, sensor_id: str) -> tuple:
-        """Follow whether anyone subscribes to the sensor's raw key: Zenoh calls back on each change (its
-        thread), so a batch reads a flag instead of asking Zenoh's routing tables under their lock."""
-        key = keys.imu(self._venue, self._agent_id, sensor_id)
-        watch = self._bus.declare_publisher(key)
-        self._asked[sensor_id] = watch.matching_status.matching
-        self._watch[sensor_id] = (key, watch, watch.declare_matching_listener(
-            lambda status: self._asked.__setitem__(sensor_id, status.matching)))
-        return self._watch[sensor_id]
 
     def _clock(self, sensor_id: str, device_ns: int, received_ns: int) -> None:
         clock = self._clocks.get(sensor_id)
@@ -93,9 +83,8 @@ class RawFeed:
         self._clocks.clear()
 
     def close(self) -> None:
-        for _, watch, listener in self._watch.values():
-            listener.undeclare()
-            watch.undeclare()
+        for watch in self._watch.values():
+            watch.close()
         self._watch.clear()
 
     def __enter__(self) -> "RawFeed":

@@ -1,0 +1,75 @@
+"""The hub puts a pose track on the bus only while someone subscribes to it; it records it anyway.
+
+Real Zenoh sessions on loopback: a hub (`run_hub`), and an edge's stand-in that publishes one chair's
+poses and watches the hub's live and, from half-way, refined tracks.
+"""
+
+from __future__ import annotations
+
+import threading
+
+from hub.chair.hub import HubSettings
+from protocol import bus as wire
+from protocol import keys, messages
+from protocol.session import session_from_dict
+from protocol.session_log import LogMessages
+from reckon.processes.hub import run_hub
+from reckon.transport.bus import Publisher, Subscription, flush, open_session, zenoh_config
+from support.waits import wait_until
+
+WAIT_S = 60.0
+S = 1_000_000_000
+SESSION = session_from_dict({
+    "venue": {"name": "court"},
+    "agents": [{"id": "c0", "sensors": [{"id": "c0-seat", "mount": "seat"}]}],
+}, where="test")
+
+
+def edge_pose(k: int):
+    return messages.new("EstimatedPose", timestamp_ns=10 * S + k * S // 50, agent_id="c0", x_m=0.01 * k, y_m=1.0,
+                        covariance=[0.25, 0, 0, 0, 0.25, 0, 0, 0, 0.01], method="reckon", track=messages.Track.LIVE)
+
+
+def test_the_refined_track_goes_out_only_once_someone_subscribes_to_it(free_endpoint, tmp_path):
+    endpoint, stop, ready = free_endpoint(), threading.Event(), threading.Event()
+    summaries, made = [], []
+
+    def hub() -> None:
+        summaries.append(run_hub(zenoh_config(listen=[endpoint]), SESSION, stop, HubSettings(lag_s=1.0),
+                                 output=tmp_path / "hub.mcap", ready=ready, on_output=made.append))
+
+    thread = threading.Thread(target=hub, daemon=True)
+    thread.start()
+    assert ready.wait(WAIT_S)
+    live_key, refined_key = keys.pose("court", "c0", "live"), keys.pose("court", "c0", "refined")
+    try:
+        with open_session(zenoh_config(connect=[endpoint])) as bus, Publisher(bus) as edge, \
+                Subscription(bus, live_key, capacity=4096) as live:
+            edge_key = bus.declare_publisher(keys.pose("court", "c0", "edge"))
+            wait_until(lambda: edge_key.matching_status.matching, WAIT_S, "the hub's subscription to edge poses")
+            for k in range(200):  # 4 s of poses: the first 3 s come out refined, and nobody wants them yet
+                edge.publish(keys.pose("court", "c0", "edge"), edge_pose(k))
+            wait_until(lambda: live.stats.received >= 200, WAIT_S, "the hub's live poses")
+            with Subscription(bus, refined_key, capacity=4096) as refined:
+                for k in range(200, 400):
+                    edge.publish(keys.pose("court", "c0", "edge"), edge_pose(k))
+                assert flush(bus, wire.alive_selector("court", wire.Role.HUB), WAIT_S)
+                wait_until(lambda: live.stats.received >= 400, WAIT_S, "the hub's live poses")
+                stop.set()  # the hub's last refined poses come out as it stops
+                thread.join(WAIT_S)
+                refined.undeclare()
+                heard = [item.decode() for item in refined]
+            edge_key.undeclare()
+    finally:
+        stop.set()
+        thread.join(WAIT_S)
+    assert not thread.is_alive()
+    made_refined = [m for m in made if m.track == messages.Track.REFINED]
+    assert len(made_refined) == 400  # every pose is refined, the last second's at the stop
+    summary = summaries[0]
+    assert summary.unheard >= 150  # at least what left the lag before anyone subscribed
+    assert len(heard) == len(made_refined) - summary.unheard > 0
+    assert [m.timestamp_ns for m in heard] == [m.timestamp_ns for m in made_refined[-len(heard):]]
+    recorded = [m for _, topic, m in LogMessages(tmp_path / "hub.mcap") if topic == refined_key]
+    assert len(recorded) == 400  # the recording holds the whole track
+    assert f"{summary.unheard} poses of a track nobody subscribed to" in str(summary)
