@@ -45,6 +45,11 @@ class VenueHub:
         if name == "CameraFrame" and self.identity is None and "camera" in self.chairs.settings.corrections:
             self.identity = IdentityEngine(self.session, self.identity_settings, pose_of=self._pose_of,
                                            clock=self.clock)
+        if self.identity is None and name != "CameraFrame":  # the usual case, to the agent's kind
+            agent_id = message.agent_id
+            if agent_id in self.chairs.agents:
+                return self.chairs.on_message(message, arrival_ns)
+            return self.pedestrians.on_message(message) if agent_id in self.pedestrians.agents else []
         out: list[Any] = []
         if self.identity is not None:
             for produced in self.identity.on_message(message):

@@ -223,7 +223,10 @@ class ChairHub:
         if view is None:
             return []
         view.arrival_ns = arrival_ns
-        self.newest_arrival_ns = max(self.newest_arrival_ns, arrival_ns)
+        if arrival_ns > self.newest_arrival_ns:
+            self.newest_arrival_ns = arrival_ns
+        if name == "EstimatedPose":  # most inputs
+            return self.on_pose(message)
         if name == "ClockSample":
             self.clocks.observe(message.sensor_id, message.timestamp_ns, message.received_ns)
             return []
@@ -232,8 +235,6 @@ class ChairHub:
                 self.clocks.observe(message.sensor_id, message.timestamp_ns + message.sample_offset_ns[-1],
                                     message.received_ns)
             return []
-        if name == "EstimatedPose":
-            return self.on_pose(message)
         if name == "ImpactEvent":
             self.on_impact(message)
         elif name == "BeaconSighting":
