@@ -248,34 +248,37 @@ class ChairHub:
     def on_pose(self, pose: Any) -> list[Any]:
         view = self.agents[pose.agent_id]
         time_ns = self.clocks.to_venue(view.seat_id, pose.timestamp_ns)
-        if pose.correction_sequence < view.acknowledged:  # the edge restarted: it holds none of ours
+        sequence, edge_x, edge_y, heading = pose.correction_sequence, pose.x_m, pose.y_m, pose.heading_rad
+        if sequence < view.acknowledged:  # the edge restarted: it holds none of ours
             view.pending.clear()
         # The edge holds corrections this hub never made (sent by it before a restart, after its last
         # checkpoint): number on from them, so the edge does not drop ours as repeats.
-        view.sequence = max(view.sequence, pose.correction_sequence)
-        view.acknowledged = pose.correction_sequence
+        if sequence > view.sequence:
+            view.sequence = sequence
+        view.acknowledged = sequence
         if view.pending:
-            view.pending = [(seq, shift) for seq, shift in view.pending if seq > pose.correction_sequence]
+            view.pending = [(seq, shift) for seq, shift in view.pending if seq > sequence]
         if view.pending:
-            xy = np.array([pose.x_m, pose.y_m]) + sum((shift for _, shift in view.pending), np.zeros(2))
+            xy = np.array([edge_x, edge_y]) + sum((shift for _, shift in view.pending), np.zeros(2))
             x, y = float(xy[0]), float(xy[1])
         else:  # the usual case; + 0.0 as the sum above adds (it turns -0.0 into 0.0)
-            x, y = pose.x_m + 0.0, pose.y_m + 0.0
+            x, y = edge_x + 0.0, edge_y + 0.0
         # A slice of the repeated field converts to an array twice as fast as the field itself.
         covariance = np.array(pose.covariance[:], dtype=float).reshape(3, 3) if len(pose.covariance) == 9 else np.eye(3)
         view.covariance = covariance
-        self._grow_extra(view, time_ns, pose)
-        view.latest_ns = time_ns if view.latest_ns is None else max(view.latest_ns, time_ns)
+        self._grow_extra(view, time_ns, edge_x, edge_y, sequence)
+        if view.latest_ns is None or time_ns > view.latest_ns:
+            view.latest_ns = time_ns
         honest = covariance.ravel().tolist()  # + extra on the position block, in floats: one small array op less
         e00, e01, e10, e11 = view.extra.ravel().tolist()
         honest[0] += e00
         honest[1] += e01
         honest[3] += e10
         honest[4] += e11
-        view.history.append(time_ns, x, y, covariance, pose.heading_rad)
+        view.history.append(time_ns, x, y, covariance, heading)
         view.poses += 1
-        out = [self._pose_message(view, time_ns, x, y, pose.heading_rad, honest, messages.Track.LIVE)]
-        for entry in view.smoother.add(time_ns, x, y, pose.heading_rad, covariance):
+        out = [self._pose_message(view, time_ns, x, y, heading, honest, messages.Track.LIVE)]
+        for entry in view.smoother.add(time_ns, x, y, heading, covariance):
             out.append(self._refined(view, entry))
         if view.passes or view.ended or view.fixes:
             out += self._end_passes(view)
@@ -285,14 +288,15 @@ class ChairHub:
             out += self.field.maps(time_ns)
         return out
 
-    def _grow_extra(self, view: AgentView, time_ns: int, pose: Any) -> None:
-        """The covariance the edge is missing grows with travel and time since the previous pose. A pose
-        holding a new correction jumped: its step is not travel."""
+    def _grow_extra(self, view: AgentView, time_ns: int, x: float, y: float, sequence: int) -> None:
+        """The covariance the edge is missing grows with travel and time since the previous pose (the
+        edge's, at `x`, `y` holding corrections up to `sequence`). A pose holding a new correction
+        jumped: its step is not travel."""
         last = view.last_edge
-        view.last_edge = (time_ns, pose.x_m, pose.y_m, pose.correction_sequence)
+        view.last_edge = (time_ns, x, y, sequence)
         if last is None or time_ns <= last[0]:
             return
-        travel = math.hypot(pose.x_m - last[1], pose.y_m - last[2]) if pose.correction_sequence == last[3] else 0.0
+        travel = math.hypot(x - last[1], y - last[2]) if sequence == last[3] else 0.0
         grow = self.settings.extra_m2_per_m * travel + self.settings.extra_m2_per_s * (time_ns - last[0]) * 1e-9
         extra = view.extra  # grown in place: every other change to it makes a new array
         if grow > 0 and extra[0, 0] + extra[1, 1] < 2 * self.settings.extra_max_m2:

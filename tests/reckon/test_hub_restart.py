@@ -375,7 +375,7 @@ def test_a_bad_state_file_fails_naming_it(tmp_path):
     with pytest.raises(InputError, match=f"{path}: not a reckon hub state file"):
         hub_state.read(path)
     path.write_bytes(hub_state.MAGIC + (99).to_bytes(4, "little"))
-    with pytest.raises(InputError, match="version 99, this hub reads version 1"):
+    with pytest.raises(InputError, match=f"version 99, this hub reads version {hub_state.VERSION}"):
         hub_state.read(path)
     assert hub_state.read(tmp_path / "absent.state") is None
 
