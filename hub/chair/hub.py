@@ -347,6 +347,12 @@ class ChairHub:
         view.fixes.append((fix.timestamp_ns, np.array([fix.x_m, fix.y_m]), covariance, kind, fix.source_id))
         return self._end_passes(view)
 
+    def without_clocks(self, min_poses: int) -> list[str]:
+        """Agents with at least `min_poses` poses whose seat has given no clock offset yet (no
+        ClockSample, no raw batch with its arrival time): their venue time is their device time."""
+        return [view.agent_id for view in self.agents.values()
+                if view.poses >= min_poses and view.seat_id not in self.clocks.envelopes]
+
     def flush(self) -> list[Any]:
         """End of session: refined poses still inside the lag."""
         return [message for part in self.flush_by_agent() for message in part]

@@ -51,6 +51,8 @@ FIFO_CAPACITY = 1024  # per input selector: what the hub holds before Zenoh push
 # the identity engine reads the IMU.
 INPUTS = ("clock/*", "beacon/*", "pose/edge", "event/impact", "event/scan", "fix", "length", "field", "tracks/*")  # tracks: camera frames
 RAW_IMU = "imu/*"
+CLOCK_CHECK_S = 1.0  # how often the hub looks for agents sending poses but no clock samples
+CLOCKLESS_POSES = 100  # ... with this many poses (2 s at 50 Hz: an edge's first ClockSample goes with its first batch)
 LIVE, REFINED = "/pose/live", "/pose/refined"  # the ends of the two pose tracks' keys (protocol.keys.pose)
 WARN_EVERY_S = 10.0
 SNAPSHOT_EVERY_S = 2.0  # a restarted hub re-applies at most this much of its recording
@@ -163,6 +165,19 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
                 log.info("a camera is on: subscribed to the edges' raw IMU for identity")
 
         ask_raw()  # a hub restored with its identity engine
+        raw_for: set[str] = set()  # agents whose raw IMU the hub takes for their clocks alone
+        next_clock_check = time.monotonic() + CLOCK_CHECK_S
+
+        def ask_raw_clocks() -> None:
+            """Agents whose poses come without any ClockSample (an edge older than the hub, a replayed
+            recording from before them): their raw IMU for the clock offsets, as before ClockSample."""
+            for agent_id in hub.chairs.without_clocks(CLOCKLESS_POSES):
+                if agent_id not in raw_for and not asked_raw:
+                    subscription.add(keys.imu(venue, agent_id, "*"))
+                    raw_for.add(agent_id)
+                    log.warning("%s: %d poses and no clock samples (an edge older than this hub, or a replayed "
+                                "recording from before them): its raw IMU subscribed to for its clock offsets",
+                                agent_id, hub.agents[agent_id].poses)
         stack.enter_context(Alive(bus, venue, wire.Role.HUB))
         if on_bus:
             stack.enter_context(on_bus(bus))
@@ -205,6 +220,9 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
                 continue
             if batch is None:
                 break
+            if time.monotonic() >= next_clock_check:
+                ask_raw_clocks()
+                next_clock_check = time.monotonic() + CLOCK_CHECK_S
             for item in batch:
                 if item.delete:
                     continue

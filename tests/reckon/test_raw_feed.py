@@ -9,9 +9,13 @@ from __future__ import annotations
 import threading
 from collections import Counter
 
+import numpy as np
+
 from hub.clocks import ClockOffsets
 from protocol import bus as wire
 from protocol import keys, messages
+from protocol.messages import imu_batch
+from protocol.session import session_from_dict
 from protocol.session_log import read_description
 from reckon.processes.edge import mcap_source, run_edge
 from reckon.processes.hub import run_hub
@@ -106,3 +110,57 @@ def test_the_hub_asks_for_raw_imu_once_a_camera_is_on(game, free_endpoint, tmp_p
         stop.set()
         hub.join(WAIT_S)
     assert not hub.is_alive()
+
+
+def test_an_agent_whose_poses_come_without_clock_samples_gets_its_raw_imu_asked_for(free_endpoint):
+    """An edge older than the hub (or a recording from before ClockSample, replayed): the hub takes that
+    agent's raw IMU for its clock offset, and its live poses move to venue time from then on."""
+    session = session_from_dict({"venue": {"name": "court"},
+                                 "agents": [{"id": "c0", "sensors": [{"id": "c0-seat", "mount": "seat"}]},
+                                            {"id": "c1", "sensors": [{"id": "c1-seat", "mount": "seat"}]}]}, where="test")
+    endpoint, stop, ready, live = free_endpoint(), threading.Event(), threading.Event(), []
+    hub = threading.Thread(target=run_hub, args=(zenoh_config(listen=[endpoint]), session, stop),
+                           kwargs={"ready": ready, "on_output": live.append}, daemon=True)
+    hub.start()
+    assert ready.wait(WAIT_S)
+    second, offset = 1_000_000_000, 5_000_000_000
+
+    def pose(agent_id: str, k: int):
+        return messages.new("EstimatedPose", timestamp_ns=10 * second + k * second // 50, agent_id=agent_id, x_m=1.0,
+                            y_m=1.0, covariance=[0.25, 0, 0, 0, 0.25, 0, 0, 0, 0.01], track=messages.Track.LIVE)
+
+    try:
+        with open_session(zenoh_config(connect=[endpoint])) as bus, Publisher(bus) as edge:
+            raw = {a: bus.declare_publisher(keys.imu("court", a, f"{a}-seat")) for a in ("c0", "c1")}
+            clock_c1 = messages.new("ClockSample", timestamp_ns=10 * second, agent_id="c1", sensor_id="c1-seat",
+                                    received_ns=10 * second + offset)
+            edge.publish(keys.clock("court", "c1", "c1-seat"), clock_c1)  # c1's edge sends its clock
+            k = 0
+
+            def asked() -> bool:  # a pose of each at every look: the hub looks once a second, on its next batch
+                nonlocal k
+                for agent_id in ("c0", "c1"):
+                    edge.publish(keys.pose("court", agent_id, "edge"), pose(agent_id, k))
+                k += 1
+                return raw["c0"].matching_status.matching
+
+            wait_until(asked, WAIT_S, "the hub to ask for c0's raw IMU")
+            assert k >= 100 and not raw["c1"].matching_status.matching  # c1 sends clock samples: not asked
+            batch = imu_batch("c0", "c0-seat", 0, np.array([10 * second + k * second // 50]), np.zeros((1, 3)),
+                              np.zeros((1, 3)), None)
+            batch.received_ns = batch.timestamp_ns + offset
+            edge.publish(keys.imu("court", "c0", "c0-seat"), batch)
+            last = k + 50
+            for k in range(k, last + 1):
+                edge.publish(keys.pose("court", "c0", "edge"), pose("c0", k))
+            wait_until(lambda: any(m.agent_id == "c0" and m.timestamp_ns == pose("c0", last).timestamp_ns + offset
+                                   for m in list(live)), WAIT_S, "c0's live poses in venue time")
+            for publisher in raw.values():
+                publisher.undeclare()
+    finally:
+        stop.set()
+        hub.join(WAIT_S)
+    assert not hub.is_alive()
+    c0 = [m.timestamp_ns for m in live if m.agent_id == "c0" and m.track == messages.Track.LIVE]
+    assert c0[0] == pose("c0", 0).timestamp_ns  # device time until the hub had an offset
+    assert all(m.timestamp_ns >= 10 * second + offset for m in live if m.agent_id == "c1")  # c1's clock from the start
