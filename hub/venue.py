@@ -45,25 +45,24 @@ class VenueHub:
         if name == "CameraFrame" and self.identity is None and "camera" in self.chairs.settings.corrections:
             self.identity = IdentityEngine(self.session, self.identity_settings, pose_of=self._pose_of,
                                            clock=self.clock)
-        if self.identity is None and name != "CameraFrame":  # the usual case, to the agent's kind
-            agent_id = message.agent_id
-            if agent_id in self.chairs.agents:
-                return self.chairs.on_message(message, arrival_ns)
-            return self.pedestrians.on_message(message) if agent_id in self.pedestrians.agents else []
+        if self.identity is None:  # the usual case
+            return self._to_its_kind(message, arrival_ns) if name != "CameraFrame" else []
         out: list[Any] = []
-        if self.identity is not None:
-            for produced in self.identity.on_message(message):
-                if messages.type_name(produced) == "PositionFix":
-                    out += self.chairs.on_message(produced, arrival_ns)  # [] for an agent that is not a chair
-                else:
-                    out.append(produced)
-        if name != "CameraFrame":  # to the agent's kind: each hub ignores the other's agents
-            agent_id = message.agent_id
-            if agent_id in self.chairs.agents:
-                out += self.chairs.on_message(message, arrival_ns)
-            elif agent_id in self.pedestrians.agents:
-                out += self.pedestrians.on_message(message)
+        for produced in self.identity.on_message(message):
+            if messages.type_name(produced) == "PositionFix":
+                out += self.chairs.on_message(produced, arrival_ns)  # [] for an agent that is not a chair
+            else:
+                out.append(produced)
+        if name != "CameraFrame":
+            out += self._to_its_kind(message, arrival_ns)
         return out
+
+    def _to_its_kind(self, message: Any, arrival_ns: int) -> list[Any]:
+        """An agent's message to the hub of its kind (each ignores the other's agents)."""
+        agent_id = message.agent_id
+        if agent_id in self.chairs.agents:
+            return self.chairs.on_message(message, arrival_ns)
+        return self.pedestrians.on_message(message) if agent_id in self.pedestrians.agents else []
 
     def flush(self) -> list[Any]:
         return self.chairs.flush() + self.pedestrians.flush()
