@@ -14,7 +14,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hub.chair.hub import STALE_MPS, ChairHub, HubSettings
+from hub.chair.hub import ChairHub, HubSettings
+from hub.chair.view import STALE_MPS
 from hub.identity.engine import IdentityEngine, IdentitySettings
 from hub.pedestrian.hub import PedestrianHub
 from protocol import keys, messages

@@ -51,7 +51,7 @@ import itertools
 import math
 from collections import deque
 from collections.abc import Collection, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -59,22 +59,18 @@ import numpy as np
 from hub.chair.corrections import CONTACT_GATE_CHI2, BeaconLevels, ContactDistance, mahalanobis2
 from hub.chair.field_map import FieldMap, FieldMapSettings
 from hub.clocks import ClockOffsets
-from hub.chair.history import PoseHistory
 from hub.chair.smoother import FixedLagSmoother
+from hub.chair.view import CORRECTIONS, AgentView, Pass
 from protocol import keys, messages
 from protocol.session import AgentKind, Mount, Session
 
 Kind = messages.CorrectionKind
-CORRECTIONS = ("beacon", "collision", "fix", "camera")  # fix: an operator's; camera: identified tracks
 FIX_GATE_CHI2 = 13.8  # 99.9 %, 2 dof
 ACROSS_VARIANCE_M2 = 1e4  # a contact says nothing about the direction across the line between chairs
-HISTORY = 1024  # poses kept per agent for looking back to a measured time (20 s at 50 Hz)
-GAP_S = 0.2  # poses further apart than this are a gap (the edge publishes at 50 Hz)
 _EYE2 = np.eye(2)  # read only
 PUSH_GATE_COS = math.cos(math.radians(60.0))  # both headings' errors, and pushes off the line between centres
 PUSH_LINE_SD = math.radians(20.0)  # spread of the pushes' line about the centres' (both headings, glancing contacts)
 _EstimatedPose = messages.EstimatedPose
-STALE_MPS = 2.0  # a chair's typical speed (a 10-chair game: 150-200 m in 120 s): how a pose's doubt grows with its age
 
 
 @dataclass(frozen=True)
@@ -106,65 +102,6 @@ class HubSettings:
         object.__setattr__(self, "corrections", tuple(c for c in CORRECTIONS if c in set(self.corrections)))
         if not (0 <= self.lag_s < math.inf and 0 < self.pose_rate_hz < math.inf):  # refuses NaN too
             raise ValueError(f"lag_s {self.lag_s} must be finite and >= 0, pose_rate_hz {self.pose_rate_hz} finite and > 0")
-
-
-@dataclass
-class _Pass:
-    peak_rssi: float
-    peak_ns: int
-    last_ns: int
-
-
-@dataclass
-class AgentView:
-    """What the hub knows of one agent."""
-
-    agent_id: str
-    seat_id: str
-    smoother: FixedLagSmoother
-    history: PoseHistory = field(default_factory=lambda: PoseHistory(HISTORY))  # live poses
-    latest_ns: int | None = None  # venue time of the newest pose
-    arrival_ns: int = 0  # hub clock when its last message came
-    covariance: np.ndarray = field(default_factory=lambda: np.eye(3))
-    pending: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (sequence, expected shift)
-    sequence: int = 0  # last Correction sent
-    acknowledged: int = 0
-    passes: dict[str, _Pass] = field(default_factory=dict)  # open, per beacon
-    ended: deque = field(default_factory=lambda: deque(maxlen=16))  # (beacon, pass) awaiting poses past the peak
-    fixes: deque = field(default_factory=lambda: deque(maxlen=16))  # PositionFix awaiting poses past its time
-    applied: dict[str, int] = field(default_factory=lambda: {name: 0 for name in CORRECTIONS})
-    poses: int = 0
-    extra: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)))  # covariance the edge is missing
-    last_edge: tuple[int, float, float, int] | None = None  # (venue time, x, y, correction sequence) as sent
-    refused_source: str = ""  # the video source whose fixes were refused in a row, most recent last
-    refused: list = field(default_factory=list)  # ... as [(time, offset)]
-    live_key: str = ""  # where its live and refined poses go (ChairHub.key_for)
-    refined_key: str = ""
-
-    def pose_at(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """Live position and its covariance at `time_ns` (the last pose not after it; the first if none)."""
-        if not self.history:
-            return None
-        return self.history.position(self.history.last_at(time_ns) or 0)
-
-    def heading_at(self, time_ns: int) -> float | None:
-        """Live heading (rad) at `time_ns`, as pose_at picks the pose."""
-        return self.history.heading(self.history.last_at(time_ns) or 0) if self.history else None
-
-    def pose_bridged(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """As pose_at, but inside a gap of more than GAP_S between two poses (the link stalled) the position
-        is interpolated between them and its covariance grows with the gap (the chair may have turned):
-        a fix that falls in the gap is not compared with where the chair was before it."""
-        after = self.history.last_at(time_ns)
-        if after is None or after + 1 >= len(self.history):
-            return self.pose_at(time_ns)
-        t0, t1 = self.history.time_at(after), self.history.time_at(after + 1)
-        (xy0, cov0), (xy1, cov1) = self.history.position(after), self.history.position(after + 1)
-        if (t1 - t0) * 1e-9 <= GAP_S:
-            return xy0, cov0
-        w = (time_ns - t0) / (t1 - t0)
-        spread = STALE_MPS * min(time_ns - t0, t1 - time_ns) * 1e-9
-        return (1 - w) * xy0 + w * xy1, np.maximum(cov0, cov1) + spread**2 * np.eye(2)
 
 
 @dataclass
@@ -327,7 +264,7 @@ class ChairHub:
             view.ended.append((sighting.beacon_id, view.passes.pop(sighting.beacon_id)))
             current = None
         if current is None:
-            view.passes[sighting.beacon_id] = _Pass(sighting.rssi_dbm, time_ns, time_ns)
+            view.passes[sighting.beacon_id] = Pass(sighting.rssi_dbm, time_ns, time_ns)
         else:
             current.last_ns = max(current.last_ns, time_ns)
             if sighting.rssi_dbm > current.peak_rssi:
