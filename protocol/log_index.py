@@ -21,13 +21,12 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, BinaryIO
 
-import lz4.frame
 import numpy as np
-import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Chunk, Metadata
+from mcap.stream_reader import get_chunk_data_stream
 
 MESSAGE, MESSAGE_INDEX = 0x05, 0x07
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log time, publish time
@@ -98,19 +97,12 @@ class IndexedLog:
         self._stream.seek(position + _RECORD_HEAD)
         chunk = Chunk.read(ReadDataStream(self._stream))
         try:
-            if chunk.compression == "zstd":
-                data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
-            elif chunk.compression == "lz4":
-                data = lz4.frame.decompress(chunk.data)
-            elif chunk.compression == "":
-                data = chunk.data
-            else:
-                raise McapError(f"chunk at {position}: compression {chunk.compression!r} is not zstd, lz4 or none")
-        except (zstandard.ZstdError, RuntimeError) as error:  # what the two decompressors raise on bad bytes
+            records, size = get_chunk_data_stream(chunk)
+        except Exception as error:  # noqa: BLE001 - zstandard's and lz4's own errors on bad bytes
             raise McapError(f"chunk at {position}: {chunk.compression} data do not decompress ({error})") from None
-        if len(data) != chunk.uncompressed_size:
-            raise McapError(f"chunk at {position}: {len(data)} bytes decompressed, its record says {chunk.uncompressed_size}")
-        return data
+        if size != chunk.uncompressed_size:
+            raise McapError(f"chunk at {position}: {size} bytes decompressed, its record says {chunk.uncompressed_size}")
+        return records.read(size)
 
 
 def open_indexed(path: Path) -> tuple[BinaryIO, IndexedLog] | None:

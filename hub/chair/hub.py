@@ -520,12 +520,9 @@ class ChairHub:
     def key_for(self, message: Any) -> str:
         """Where an output message goes on the bus."""
         name = messages.type_name(message)
-        if name == "EstimatedPose":
-            view = self.agents.get(message.agent_id)
-            if view is not None:  # two a pose: each agent's pose keys made once
-                return view.refined_key if message.track == messages.Track.REFINED else view.live_key
-            track = "refined" if message.track == messages.Track.REFINED else "live"
-            return keys.pose(self.venue, message.agent_id, track)
+        if name == "EstimatedPose":  # two a pose: each agent's pose keys are made once
+            view = self.agents[message.agent_id]
+            return view.refined_key if message.track == messages.Track.REFINED else view.live_key
         if name == "Correction":
             return keys.correction(self.venue, message.agent_id)
         if name == "FieldMap":

@@ -171,8 +171,10 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
         def ask_raw_clocks() -> None:
             """Agents whose poses come without any ClockSample (an edge older than the hub, a replayed
             recording from before them): their raw IMU for the clock offsets, as before ClockSample."""
+            if asked_raw:  # a camera is on: every agent's raw IMU comes already
+                return
             for agent_id in hub.chairs.without_clocks(CLOCKLESS_POSES):
-                if agent_id not in raw_for and not asked_raw:
+                if agent_id not in raw_for:
                     subscription.add(keys.imu(venue, agent_id, "*"))
                     raw_for.add(agent_id)
                     log.warning("%s: %d poses and no clock samples (an edge older than this hub, or a replayed "
