@@ -52,7 +52,7 @@ def results(out: Path, spec: LoadSpec, hubs: list[Child], children: dict[str, Ch
     both = sent & seen & steady
     stamped = both & (hub_put > 0)
     subscribed_status = any(stream.startswith("status") for stream in INPUTS)
-    hub_expected = (generated["poses"] + generated["impacts"] + generated["sightings"]
+    hub_expected = (generated["poses"] + generated["impacts"] + generated["sightings"] + generated["clocks"]
                     + (generated["statuses"] if subscribed_status else 0))
     lost_live = int((sent & ~seen).sum())
     wall_s = at_end["wall"] - at_start["wall"]
@@ -62,7 +62,7 @@ def results(out: Path, spec: LoadSpec, hubs: list[Child], children: dict[str, Ch
     cores["other_processes"] = (at_end["machine_busy"] - at_start["machine_busy"]) / wall_s - sum(cores.values())
     steady_rss = [mb for t, mb in rss_mb if warmup_s <= t <= spec.duration_s - margin_s] or [mb for _, mb in rss_mb]
     # The inputs the hub took in the window: its live poses that reached the watcher in it, times
-    # the hub's inputs per live pose (poses plus sightings and impacts).
+    # the hub's inputs per live pose (poses plus sightings, impacts and clock samples).
     in_window = int(((received >= at_start["wall"] * 1e9) & (received < at_end["wall"] * 1e9)).sum())
     window_inputs = in_window * summary["inputs"] / max(1, watched["live"])
     threads = {name: (at_end["hub_threads"].get(name, 0.0) - used) / wall_s
@@ -140,6 +140,7 @@ def format_load(result: dict[str, Any]) -> str:
         f"{result['corrections']['total']} corrections ({result['corrections']['pairs']} collision pairs; taken "
         + ", ".join(f"{k} {v}" for k, v in sorted(result["corrections"]["taken_by_kind"].items())) + ")",
         f"sent: {d['generated']['poses']} poses, {d['generated']['impacts']} impacts, "
-        f"{d['generated']['sightings']} sightings, {d['generated']['statuses']} statuses; generator at most "
+        f"{d['generated']['sightings']} sightings, {d['generated']['clocks']} clock samples, "
+        f"{d['generated']['statuses']} statuses; generator at most "
         f"{d['generated']['max_behind_ms']:.1f} ms behind its schedule",
     ])

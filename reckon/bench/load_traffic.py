@@ -4,7 +4,7 @@ Started by `reckon.bench.load.run_load` as `python -m reckon.bench.load generate
 each writes what it did into OUT for the run to read.
 
 - generator: EstimatedPose at `rate_hz` per chair, ImpactEvents in pairs when two chairs touch,
-  BeaconSightings of its court's two goal beacons, DeviceStatus at 1 Hz. It takes the hub's
+  BeaconSightings of its court's two goal beacons, a ClockSample per device and DeviceStatus at 1 Hz. It takes the hub's
   corrections back as an edge would (acknowledges them in `correction_sequence` and moves its
   estimate by the Kalman shift), so the hub's pending shifts stay as short as in a real game;
 - watcher: every `pose/live` the hub publishes, stamped on arrival.
@@ -46,6 +46,7 @@ def generate(spec: LoadSpec, out: Path) -> None:
     ids = [a.id for a in session.agents]
     index = {agent_id: i for i, agent_id in enumerate(ids)}
     seat = [f"{agent_id}-s" for agent_id in ids]
+    sensors = [[sensor.id for sensor in agent.sensors] for agent in session.agents]
     beacon_xy = np.array([[b.x_m, b.y_m] for b in session.venue.beacons])
     beacon_ids = [b.id for b in session.venue.beacons]
     own_beacons = np.stack([2 * (np.arange(spec.agents) // COURT_AGENTS), 2 * (np.arange(spec.agents) // COURT_AGENTS) + 1], 1)
@@ -61,7 +62,7 @@ def generate(spec: LoadSpec, out: Path) -> None:
     acknowledged = np.zeros(spec.agents, dtype=np.int64)
     drift = np.zeros((spec.agents, 2))
     touching = np.zeros((-(-spec.agents // COURT_AGENTS), COURT_AGENTS, COURT_AGENTS), dtype=bool)
-    counts = {"poses": 0, "impacts": 0, "sightings": 0, "statuses": 0, "contacts": 0, "corrections_taken": 0}
+    counts = {"poses": 0, "impacts": 0, "sightings": 0, "clocks": 0, "statuses": 0, "contacts": 0, "corrections_taken": 0}
     taken_by_kind: dict[str, int] = {}
     corrections: queue.SimpleQueue[bytes] = queue.SimpleQueue()  # unbounded: tens a second
     slots = [np.arange(s, spec.agents, PHASES) for s in range(PHASES)]
@@ -117,6 +118,11 @@ def generate(spec: LoadSpec, out: Path) -> None:
                             beacon_id=beacon_ids[own_beacons[i, end]], rssi_dbm=float(rssi[i, end])))
                         counts["sightings"] += 1
                     if status_tick:
+                        for sensor in sensors[i]:  # each device's clock once a second, as an edge's RawFeed sends it
+                            publisher.publish(keys.clock(venues[i], ids[i], sensor), messages.new(
+                                "ClockSample", timestamp_ns=pose.timestamp_ns, agent_id=ids[i], sensor_id=sensor,
+                                received_ns=pose.timestamp_ns))
+                            counts["clocks"] += 1
                         publisher.publish(keys.status(venues[i], ids[i], seat[i]), messages.new(
                             "DeviceStatus", timestamp_ns=pose.timestamp_ns, agent_id=ids[i], sensor_id=seat[i],
                             connected=True, battery_pct=-1.0, last_sample_age_s=0.01,

@@ -157,29 +157,27 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
                                                               fifo_capacity=FIFO_CAPACITY, by_source_time=True))
         asked_raw = False
 
-        def ask_raw() -> None:
+        def ask_raw(why: str, level: int = logging.INFO) -> None:
+            """Subscribe to every agent's raw IMU, once: one FIFO more, however many agents (a FIFO per
+            agent made each sweep of the subscription as long as the venue)."""
             nonlocal asked_raw
-            if not asked_raw and hub.identity is not None:
+            if not asked_raw:
                 subscription.add(keys.all_agents(venue, RAW_IMU))
                 asked_raw = True
-                log.info("a camera is on: subscribed to the edges' raw IMU for identity")
-
-        ask_raw()  # a hub restored with its identity engine
-        raw_for: set[str] = set()  # agents whose raw IMU the hub takes for their clocks alone
-        next_clock_check = time.monotonic() + CLOCK_CHECK_S
+                log.log(level, "subscribed to the edges' raw IMU: %s", why)
 
         def ask_raw_clocks() -> None:
-            """Agents whose poses come without any ClockSample (an edge older than the hub, a replayed
-            recording from before them): their raw IMU for the clock offsets, as before ClockSample."""
-            if asked_raw:  # a camera is on: every agent's raw IMU comes already
-                return
-            for agent_id in hub.chairs.without_clocks(CLOCKLESS_POSES):
-                if agent_id not in raw_for:
-                    subscription.add(keys.imu(venue, agent_id, "*"))
-                    raw_for.add(agent_id)
-                    log.warning("%s: %d poses and no clock samples (an edge older than this hub, or a replayed "
-                                "recording from before them): its raw IMU subscribed to for its clock offsets",
-                                agent_id, hub.agents[agent_id].poses)
+            """Chairs whose poses come without any ClockSample (edges older than the hub, a replayed
+            recording from before them): the raw IMU for their clock offsets, as before ClockSample."""
+            late = [] if asked_raw else hub.chairs.without_clocks(CLOCKLESS_POSES)
+            if late:
+                ask_raw(f"{len(late)} chairs ({', '.join(late[:5])}{', ...' if len(late) > 5 else ''}) sent "
+                        f"{CLOCKLESS_POSES} poses or more and no clock samples (edges older than this hub, or a "
+                        "replayed recording from before them): their clock offsets come from it", logging.WARNING)
+
+        if hub.identity is not None:  # a hub restored with its identity engine
+            ask_raw("a camera is on (the identity engine reads the IMU)")
+        next_clock_check = time.monotonic() + CLOCK_CHECK_S
         stack.enter_context(Alive(bus, venue, wire.Role.HUB))
         if on_bus:
             stack.enter_context(on_bus(bus))
@@ -245,8 +243,8 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
                             on_output(message)
                         continue
                     emit(hub.on_message(message, item.received_ns))
-                    if not asked_raw and message.DESCRIPTOR.name == "CameraFrame":
-                        ask_raw()
+                    if not asked_raw and hub.identity is not None:
+                        ask_raw("a camera is on (the identity engine reads the IMU)")
                 except (InputError, ValueError) as error:
                     summary.skipped += 1
                     skipped_since += 1
