@@ -53,9 +53,9 @@ SIGNATURES = {  # C-contiguous arrays, as the just-in-time code specialises (loo
     # run_batch(settings, state, times, values)
     "run_batch": "Tuple((f8[::1], i8[::1]))(f8[::1], f8[::1], i8[::1], f8[:, ::1])",
     # run_poses(settings, state, times, values, next_pose_ns, period_ns)
-    "run_poses": "Tuple((f8[::1], i8, i8, i8[::1], f8[:, ::1], i8[::1], f8[:, ::1]))(f8[::1], f8[::1], i8[::1], f8[:, ::1], i8, i8)",
+    "run_poses": "Tuple((i8, i8, i8, i8[::1], f8[:, ::1]))(f8[::1], f8[::1], i8[::1], f8[:, ::1], i8, i8)",
     # merge_and_run(merge_batch's arguments, then settings, state, next_pose_ns, period_ns)
-    "merge_and_run": "Tuple((i8, f8[::1], i8, i8, i8[::1], f8[:, ::1], i8[::1], f8[:, ::1]))"
+    "merge_and_run": "Tuple((i8, i8, i8, i8, i8[::1], f8[:, ::1]))"
                      "(f8[::1], i8[::1], f8[::1], i8, i8, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], i8, f8[::1], f8[::1], i8, i8)",
 }
 BUILD_TIMEOUT_S = 600.0

@@ -66,6 +66,8 @@ class ChairEdge:
         self.field_count = 0  # the aid's readings published so far
         self.maps_taken = self.maps_refused = 0
         self.pending_warnings: list[str] = []
+        self.pose_fields = messages.EstimatedPose(schema_version=messages.SCHEMA_VERSION, agent_id=agent.id,
+                                                  method=method, track=messages.Track.LIVE)
 
     @property
     def state(self) -> ChairState | None:
@@ -153,10 +155,10 @@ class ChairEdge:
             self._apply_corrections()
             if self.map is not None or self.vector[layout.MAP_VAR] != 0.0:
                 self._look_up_map()
-            merged, *ran = self.kernels.merge_and_run(*merge_arguments, self.packed_settings, self.vector,
-                                                     self.next_pose_ns, self.period_ns)
+            merged, flags, self.next_pose_ns, posed, times, rows = self.kernels.merge_and_run(
+                *merge_arguments, self.packed_settings, self.vector, self.next_pose_ns, self.period_ns)
             self.samples += merged
-            return self._publish(*ran) + self._field_reading()
+            return self._publish(flags, posed, times, rows) + self._field_reading()
         times, values = self.kernels.merge_batch(*merge_arguments)
         if not len(times):
             return []
@@ -165,8 +167,9 @@ class ChairEdge:
                                               self.agent.start_heading_rad))
         self.samples += len(times)
         self._apply_corrections()
-        return self._publish(*self.kernels.run_poses(self.packed_settings, self.vector, times[1:], values[1:],
-                                                     self.next_pose_ns, self.period_ns))
+        flags, self.next_pose_ns, posed, times, rows = self.kernels.run_poses(
+            self.packed_settings, self.vector, times[1:], values[1:], self.next_pose_ns, self.period_ns)
+        return self._publish(flags, posed, times, rows)
 
     def _look_up_map(self) -> None:
         """The map's offset and variance where the chair is, into the filter's state: bilinear between
@@ -204,37 +207,42 @@ class ChairEdge:
         return [messages.new("FieldReading", timestamp_ns=time_ns, agent_id=self.agent.id, x_m=float(v[layout.FIELD_X]), y_m=float(v[layout.FIELD_Y]),
                              offset_rad=float(v[layout.FIELD_OFFSET]), variance_rad2=float(v[layout.FIELD_VAR]))]
 
-    def _publish(self, vector: np.ndarray, flags: int, next_pose_ns: int, pose_times: np.ndarray, poses: np.ndarray,
-                 impact_times: np.ndarray, impacts: np.ndarray) -> list[Any]:
-        """`run_poses`' results into the state and out as messages."""
+    def _publish(self, flags: int, posed: int, times: np.ndarray, rows: np.ndarray) -> list[Any]:
+        """A kernel call's poses and impacts (times and rows as run_poses hands them; the state
+        already advanced) out as messages."""
         out: list[Any] = []
-        self.vector, self.next_pose_ns = vector, next_pose_ns
         if not self.axle_check and self.vector[layout.AXLE_DONE]:  # made in this call: its flag is here
             self._note_axle_check(Flag(int(flags)))
+        if not len(times):  # a wheel's batch, most often: its seat samples were released before
+            return out
+        times, rows = times.tolist(), rows.tolist()
+        impacts = [self._impact(time_ns, row) for time_ns, row in zip(times[posed:], rows[posed:])]
         hit = 0  # an impact goes out before the pose its run ended with, as it happened before it
-        for time_ns, pose in zip(pose_times.tolist(), poses.tolist()):
-            while hit < len(impact_times) and impact_times[hit] <= time_ns:
-                out.append(self._impact(int(impact_times[hit]), impacts[hit]))
+        for time_ns, pose in zip(times[:posed], rows[:posed]):
+            while hit < len(impacts) and impacts[hit].timestamp_ns <= time_ns:
+                out.append(impacts[hit])
                 hit += 1
             out.append(self._pose_message(time_ns, pose))
-        out += [self._impact(int(impact_times[k]), impacts[k]) for k in range(hit, len(impact_times))]
-        self.poses += len(pose_times)
-        self.impacts += len(impact_times)
+        out += impacts[hit:]
+        self.poses += posed
+        self.impacts += len(impacts)
         return out
 
     def _pose_message(self, time_ns: int, pose: list[float]) -> Any:
-        """A `run_poses` row (x, y, heading, covariance 3 x 3) as the EstimatedPose it stands for."""
-        return messages.EstimatedPose(
-            schema_version=messages.SCHEMA_VERSION, timestamp_ns=time_ns, agent_id=self.agent.id, x_m=pose[0],
-            y_m=pose[1], heading_rad=pose[2], covariance=pose[3:], method=self.method, track=messages.Track.LIVE,
-            correction_sequence=self.correction_sequence)
+        """A pose row (x, y, heading, covariance 3 x 3) as the EstimatedPose it stands for: its fixed
+        fields copied from one made once (a third cheaper than setting them by name each time)."""
+        message = messages.EstimatedPose()
+        message.CopyFrom(self.pose_fields)
+        message.timestamp_ns, message.x_m, message.y_m, message.heading_rad = time_ns, pose[0], pose[1], pose[2]
+        message.covariance.extend(pose[3:])
+        message.correction_sequence = self.correction_sequence
+        return message
 
-    def _impact(self, time_ns: int, row: np.ndarray) -> Any:
-        """A `run_poses` impact row (accel, gravity then) as its ImpactEvent: the push without gravity."""
-        accel, gravity = row[:3], row[3:]
+    def _impact(self, time_ns: int, row: list[float]) -> Any:
+        """An impact row (accel, gravity then) as its ImpactEvent: the push without gravity."""
+        ax, ay, az, gx, gy = row[:5]
         return messages.new("ImpactEvent", timestamp_ns=time_ns, agent_id=self.agent.id, sensor_id=self.merger.seat_id,
-                            peak_g=float(np.sqrt(accel @ accel) - 1.0), forward_g=float(accel[0] - gravity[0]),
-                            left_g=float(accel[1] - gravity[1]))
+                            peak_g=math.sqrt(ax * ax + ay * ay + az * az) - 1.0, forward_g=ax - gx, left_g=ay - gy)
 
     def _note_axle_check(self, flags: Flag) -> None:
         """Keep the scale check's outcome; a refused one is the venue file's problem, so say why."""

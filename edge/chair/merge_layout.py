@@ -116,21 +116,27 @@ class PackedMerger:
 
     def arguments(self, batch: Any, flush: bool = False) -> tuple:
         """`merge_batch`'s arguments for one ImuBatch (None, or another agent's sensor: no samples)."""
-        if batch is None or batch.sensor_id not in self.roles or not len(batch.sample_offset_ns):
+        role = None if batch is None else self.roles.get(batch.sensor_id)
+        field_offsets = None if role is None else batch.sample_offset_ns
+        n = 0 if field_offsets is None else len(field_offsets)
+        if not n:
             # the merger settles after every sample, so no samples release nothing more (the kernel is
             # called all the same: a just-in-time one compiles on ChairEdge's first call, not on a stream's)
             return self.config, self.ints, self.floats, SEAT, 0, self._no_times, self._none, self._none, self._none, \
                 int(flush)
-        role, n = self.roles[batch.sensor_id], len(batch.sample_offset_ns)
-        if len(batch.accel_g) != 3 * n or len(batch.gyro_dps) != 3 * n:  # edge/health.py drops these first
-            raise ValueError(f"ImuBatch of {batch.sensor_id} (sequence {batch.sequence}): {len(batch.accel_g)} accel "
-                             f"and {len(batch.gyro_dps)} gyro values for {n} samples, not 3 each")
-        offsets = np.fromiter(batch.sample_offset_ns, np.int64, n)  # twice as fast as asarray on a repeated field
-        accel = np.asarray(batch.accel_g, dtype=np.float64).reshape(n, 3)
-        gyro = np.asarray(batch.gyro_dps, dtype=np.float64).reshape(n, 3)
+        field_accel, field_gyro = batch.accel_g, batch.gyro_dps
+        if len(field_accel) != 3 * n or len(field_gyro) != 3 * n:  # edge/health.py drops these first
+            raise ValueError(f"ImuBatch of {batch.sensor_id} (sequence {batch.sequence}): {len(field_accel)} accel "
+                             f"and {len(field_gyro)} gyro values for {n} samples, not 3 each")
+        offsets = np.fromiter(field_offsets, np.int64, n)  # twice as fast as asarray on a repeated field
+        accel = np.asarray(field_accel, dtype=np.float64).reshape(n, 3)
+        gyro = np.asarray(field_gyro, dtype=np.float64).reshape(n, 3)
         # only the seat's magnetometer is read (the wheels' spin through theirs)
-        mag = (np.asarray(batch.mag_gauss, dtype=np.float64).reshape(n, 3)
-               if role == SEAT and len(batch.mag_gauss) == 3 * n else self._none)
+        mag = self._none
+        if role == SEAT:
+            field_mag = batch.mag_gauss
+            if len(field_mag) == 3 * n:
+                mag = np.asarray(field_mag, dtype=np.float64).reshape(n, 3)
         return self.config, self.ints, self.floats, role, batch.timestamp_ns, offsets, accel, gyro, mag, int(flush)
 
     @property

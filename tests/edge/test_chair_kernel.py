@@ -14,9 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from edge.chair.estimator import DEG, ChairSample, ChairSettings, ChairState, Flag, N, start, step
-from edge.chair.kernel import (COV, FLAGS, GRAVITY, MEAN, SAMPLE_WIDTH, STATE_SIZE, V_ACCEL, V_HAS_MAG, V_LEFT, V_MAG,
-                               V_RIGHT, V_WHEEL_YAW, V_YAW_RATE, pack_samples, pack_settings, pack_state, run_batch,
-                               run_poses, step_batch, unpack_state)
+from edge.chair.kernel import (COV, FLAGS, GRAVITY, IMPACT_WIDTH, MEAN, SAMPLE_WIDTH, STATE_SIZE, V_ACCEL, V_HAS_MAG,
+                               V_LEFT, V_MAG, V_RIGHT, V_WHEEL_YAW, V_YAW_RATE, pack_samples, pack_settings, pack_state,
+                               run_batch, run_poses, step_batch, unpack_state)
 from protocol.session_log import read_session
 from reckon.evaluation.inputs import build_inputs
 from reckon.evaluation.reckon_run import merged_samples
@@ -192,10 +192,11 @@ def test_run_poses_is_run_batch_cut_at_each_pose(chairs, cuts, period_ns):
                 expected_next = max(expected_next + period_ns, int(times[i]) - period_ns // 2)
                 expected_poses.append((times[i], *expected_state[MEAN:MEAN + 3],
                                        *expected_state[COV:COV + N * N].reshape(N, N)[:3, :3].ravel()))
-        state, flags, next_pose_ns, pose_times, pose_rows, impact_times, impact_rows = run_poses(
+        flags, next_pose_ns, posed, out_times, rows = run_poses(
             settings_vector, state, times[lo:hi], values[lo:hi], next_pose_ns, period_ns)
-        poses += [(t, *row) for t, row in zip(pose_times, pose_rows)]
-        impacts += [(t, *row) for t, row in zip(impact_times, impact_rows)]
+        assert not rows[posed:, IMPACT_WIDTH:].any()
+        poses += [(t, *row) for t, row in zip(out_times[:posed], rows[:posed])]
+        impacts += [(t, *row[:IMPACT_WIDTH]) for t, row in zip(out_times[posed:], rows[posed:])]
         seen |= flags
     np.testing.assert_array_equal(state, expected_state)
     assert next_pose_ns == expected_next
