@@ -44,8 +44,8 @@ from edge.chair.layout import ChairKernels
 log = logging.getLogger(__name__)
 DIRECTORY = Path(edge.chair.__file__).resolve().parent
 # of edge/chair: what the machine code is made from, constants included
-SOURCES = ("kernel.py", "kernel_math.py", "mag_kernel.py", "layout.py", "estimator.py", "merge_kernel.py",
-           "merge_layout.py", "merger.py", "wheel_clock.py")
+SOURCES = ("kernel.py", "kernel_math.py", "mag_kernel.py", "layout.py", "state.py", "estimator.py", "magnetometer.py",
+           "merge_kernel.py", "merge_layout.py", "merger.py", "wheel_clock.py")
 PREFIX = "_chair_kernel_"
 SIGNATURES = {  # C-contiguous arrays, as the just-in-time code specialises (loops over 'A' arrays are slower)
     # merge_batch(config, ints, floats, role, time_ns, offsets, accel, gyro, mag, flush)

@@ -23,9 +23,9 @@ import numpy as np
 
 from edge.base import EdgeSummary
 from edge.chair import layout
-from edge.chair.estimator import (GYRO_SCALE, N, ChairSettings, ChairState, Flag, axle_scale_measured, position_update,
-                                  start)
+from edge.chair.estimator import axle_scale_measured, position_update, start
 from edge.chair.merge_layout import PackedMerger
+from edge.chair.state import GYRO_SCALE, ChairSettings, ChairState, Flag
 from protocol import messages
 from protocol.session import Agent
 

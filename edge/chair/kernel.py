@@ -35,7 +35,7 @@ import math
 import numpy as np
 from numba import njit
 
-from edge.chair.estimator import BIAS, DEG, GYRO_SCALE, HEADING, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState
+from edge.chair.state import BIAS, DEG, GYRO_SCALE, HEADING, SCALE, N, X, Y, ChairSample, ChairSettings, ChairState
 from edge.chair.kernel_math import fma, pow2, sum3
 # The loop reads the layout's hundred indices as globals (numba freezes them as constants): all of them.
 from edge.chair.layout import *  # noqa: F403

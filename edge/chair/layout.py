@@ -1,5 +1,5 @@
 """A chair filter's flat layouts: the packed state, settings and sample rows that edge/chair/kernel.py's
-compiled loop reads, and the packing to and from edge/chair/estimator.py's readable types.
+compiled loop reads, and the packing to and from edge/chair/state.py's readable types.
 
 Kept apart from the compiled loop so that what runs it (ChairEdge, the bench) needs numpy alone: the
 loop itself is loaded ahead-of-time compiled (reckon/kernels.py), and numba stays out of the edge
@@ -16,8 +16,8 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from edge.chair.estimator import (DEG, MAG_STATS, N, AxleScale, ChairSample, ChairSettings, ChairState, Flag, MagAid,
-                                  axle_scale_noise)
+from edge.chair.estimator import axle_scale_noise
+from edge.chair.state import DEG, MAG_STATS, N, AxleScale, ChairSample, ChairSettings, ChairState, Flag, MagAid
 
 # --- state vector --------------------------------------------------------------------------
 TIME_HIGH = 0  # time_ns >> 32 and time_ns & 0xFFFFFFFF: each exact in a float64, the whole is not

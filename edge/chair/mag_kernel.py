@@ -1,5 +1,5 @@
 """The chair filter's magnetometer aid, compiled: `magnetometer` is what edge/chair/kernel.py's
-step calls, the reference's aid (edge/chair/estimator.py: the hard-iron circle fit, north - heading
+step calls, the reference's aid (edge/chair/magnetometer.py: the hard-iron circle fit, north - heading
 read once per correlation length, the field's turn measuring gyro bias and scale, the hall's learned
 disturbance) in place on the packed state, in the same order of operations.
 """
@@ -10,8 +10,8 @@ import math
 
 from numba import njit
 
-from edge.chair.estimator import (BIAS, DEG, GYRO_SCALE, HEADING, M_DIFF, M_LAST, M_RADIAL, M_RADIUS, M_STEP,
-                                  M_WEIGHT, MAG_STATS, NORTH, N, X, Y)
+from edge.chair.state import (BIAS, DEG, GYRO_SCALE, HEADING, M_DIFF, M_LAST, M_RADIAL, M_RADIUS, M_STEP, M_WEIGHT,
+                              MAG_STATS, NORTH, N, X, Y)
 from edge.chair.kernel_math import fma, pow2, sum3, wrap
 from edge.chair.layout import (FIELD_COUNT, FIELD_OFFSET, FIELD_TIME_HIGH, FIELD_TIME_LOW, FIELD_VAR, FIELD_X,
                                FIELD_Y, GRAVITY, LAPACK_EPS, MAG_ANCHOR, MAG_DUE, MAG_INNOVATION, MAG_READY,

@@ -40,7 +40,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-from edge.chair.estimator import ChairSample
+from edge.chair.state import ChairSample
 from edge.chair.wheel_clock import WheelClock
 from protocol.session import Agent, Mount
 

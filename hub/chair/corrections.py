@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from edge.chair.estimator import N, X, Y, ChairState
+from edge.chair.state import N, X, Y, ChairState
 from protocol.session import Beacon
 
 PATH_LOSS_EXPONENT = 2.0  # free space; the hub cannot know the hall's

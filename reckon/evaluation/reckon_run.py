@@ -22,7 +22,7 @@ import numpy as np
 
 from edge.chair.edge import ChairEdge
 from edge.chair.merger import ChairMerger
-from edge.chair.estimator import ChairSample
+from edge.chair.state import ChairSample
 from hub.chair.hub import HubSettings
 from hub.venue import VenueHub
 from protocol import messages

@@ -8,8 +8,8 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from edge.chair.estimator import (BIAS, GYRO_SCALE, HEADING, X, Y, ChairSample, ChairSettings, Flag, position_update, start,
-                                  step, wheel_turn_ratio_prior)
+from edge.chair.estimator import position_update, start, step, wheel_turn_ratio_prior
+from edge.chair.state import BIAS, GYRO_SCALE, HEADING, X, Y, ChairSample, ChairSettings, Flag
 from hub.chair.corrections import BEACON_BASE_SD_M, BeaconLevels, ContactDistance, contact_update
 from protocol.session import Beacon
 

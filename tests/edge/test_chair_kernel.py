@@ -13,10 +13,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from edge.chair.estimator import DEG, ChairSample, ChairSettings, ChairState, Flag, N, start, step
+from edge.chair.estimator import start, step
 from edge.chair.kernel import (COV, FLAGS, GRAVITY, IMPACT_WIDTH, MEAN, SAMPLE_WIDTH, STATE_SIZE, V_ACCEL, V_HAS_MAG,
                                V_LEFT, V_MAG, V_RIGHT, V_WHEEL_YAW, V_YAW_RATE, pack_samples, pack_settings, pack_state,
                                run_batch, run_poses, step_batch, unpack_state)
+from edge.chair.state import DEG, ChairSample, ChairSettings, ChairState, Flag, N
 from protocol.session_log import read_session
 from reckon.evaluation.inputs import build_inputs
 from reckon.evaluation.reckon_run import merged_samples

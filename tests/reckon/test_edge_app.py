@@ -13,7 +13,8 @@ from reckon.processes.edge import mcap_source, open_sources, run_edge
 from reckon.evaluation.inputs import build_inputs
 from reckon.evaluation.reckon_run import merged_samples
 from reckon.transport.record import record
-from edge.chair.estimator import ChairSettings, start, step
+from edge.chair.estimator import start, step
+from edge.chair.state import ChairSettings
 from protocol.errors import ConfigError
 from support.ble import BEACON_UUID, FakeBleakClient, FakeRadio, ibeacon_bytes, motion_bytes
 from support.games import Game

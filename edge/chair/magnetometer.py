@@ -1,0 +1,230 @@
+"""The seat magnetometer's aid to the chair filter: edge/chair/estimator.py's `step` calls
+`magnetometer` with every sample; edge/chair/mag_kernel.py is its compiled mirror.
+
+The seat magnetometer is a self-calibrating aid that learns the hall it is in. The chair's hard
+iron is a fixed offset in the chair frame, found by a running circle fit as the chair turns;
+around its centre the field's angle is (north - heading). A building's disturbance is fixed in
+space, about isotropic, and nobody knows it in advance (0-25 deg RMS, correlated over 1-10 m):
+- its size is learned from the spread of the field's strength around the circle (a disturbance
+  that turns the field by a degrees changes its strength by as much), its correlation length
+  from how fast successive readings' strengths differ over the travel between them;
+- the turn the field saw over `mag_turn_s` measures the gyro's bias and scale: over little
+  travel the disturbance hardly changes, so its change, 2 var (1 - exp(-d / L)), is the
+  noise; a pivot in place measures the scale exactly, however disturbed the hall;
+- north - heading is measured once per correlation length of travel, not per second (a parked
+  chair repeats one disturbed reading), chi-square gated; north is learned from the known start
+  heading and re-learned after `mag_recover_rejections` rejections in a row;
+- a hall more disturbed than `mag_trust_sd_deg` is trusted less than its spread says (chairs
+  keep to a few places, so its errors do not average out as independent readings would);
+- every reading's variance includes the fitted centre's own uncertainty;
+- the hub maps the hall from every chair's readings (hub/chair/field_map.py); where its map,
+  handed in by the edge as `MagAid.map_offset_rad` / `map_var_rad2`, leaves less than the hall's
+  own disturbance, its offset comes out of north - heading (not out of the turn: a difference
+  over metres, to which the map's cell-to-cell errors would add); each reading that counts for
+  the statistics, north known, is offered to the map (`MagAid.field_*`).
+Tilt comes from gravity measured while still, never while moving (a sprint's 2.5 m/s^2 would
+read as 14 deg of pitch).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from edge.chair.state import (BIAS, DEG, GYRO_SCALE, HEADING, M_DIFF, M_LAST, M_RADIAL, M_RADIUS, M_STEP, M_WEIGHT,
+                              N, NORTH, X, Y, ChairSample, ChairSettings, Flag, MagAid, wrap)
+
+
+def magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, gravity: tuple[float, float, float],
+                  mean: np.ndarray, cov: np.ndarray, dt: float, travel_m: float, raw_turn_rad: float
+                  ) -> tuple[MagAid, np.ndarray, np.ndarray, Flag]:
+    """Every `mag_period_s`: extend the hard-iron fit and the hall's statistics; measure the gyro by the
+    turn the field saw; learn north, or correct the heading once the chair has moved a correlation
+    length since the last correction. `raw_turn_rad` is the seat gyro's raw turn this step (NaN in a gap)."""
+    due = mag.due_s - dt
+    since_read, since_update = mag.since_read_m + travel_m, mag.since_update_m + travel_m
+    turn_gyro, turn_s, turn_m = mag.turn_gyro_rad + raw_turn_rad, mag.turn_s + dt, mag.turn_m + travel_m
+    if sample.mag_gauss is None or due > 0.0:
+        return replace(mag, due_s=due, since_read_m=since_read, since_update_m=since_update, turn_gyro_rad=turn_gyro,
+                       turn_s=turn_s, turn_m=turn_m), mean, cov, Flag.NONE
+    horizontal = _level(sample.mag_gauss, gravity)
+    fit = _fit_add(mag.fit, horizontal, math.exp(-settings.mag_period_s / settings.mag_fit_memory_s))
+    mag = replace(mag, fit=fit, due_s=settings.mag_period_s, since_read_m=since_read, since_update_m=since_update,
+                  turn_gyro_rad=turn_gyro, turn_s=turn_s, turn_m=turn_m)
+    centre = _fit_centre(fit, settings.mag_fit_min_spread, settings.mag_fit_min_points)
+    if centre is None:
+        return mag, mean, cov, Flag.NONE
+    east, north_part = horizontal[0] - centre[0], horizontal[1] - centre[1]
+    raw_angle = math.atan2(north_part, east)  # = north - heading + the hall's disturbance here
+    radius = math.sqrt(east * east + north_part * north_part)
+    if since_read >= settings.mag_min_step_m:
+        mag = replace(mag, stats=_learn_disturbance(settings, mag.stats, radius, since_read), since_read_m=0.0)
+        if mag.ready:
+            mag = replace(mag, field_count=mag.field_count + 1, field_time_ns=sample.time_ns, field_x_m=float(mean[X]),
+                          field_y_m=float(mean[Y]), field_offset_rad=wrap(raw_angle - (mean[NORTH] - mean[HEADING])),
+                          field_var_rad2=float(cov[NORTH, NORTH] - 2.0 * cov[NORTH, HEADING] + cov[HEADING, HEADING]))
+    variance, correlation_m = mag_disturbance(settings, mag.stats)
+    centre_spread = _centre_spread(fit, radius, variance)  # the strength's spread: untouched by a map of directions
+    flags = Flag.NONE
+    if not math.isfinite(mag.anchor_angle) or not math.isfinite(turn_gyro):
+        mag = replace(mag, anchor_angle=raw_angle, turn_gyro_rad=0.0, turn_s=0.0, turn_m=0.0)
+    elif turn_s >= settings.mag_turn_s:
+        mean, cov, flags = _turn_update(settings, mag, raw_angle, mean, cov, variance, correlation_m, centre_spread)
+        mag = replace(mag, anchor_angle=raw_angle, turn_gyro_rad=0.0, turn_s=0.0, turn_m=0.0)
+    # north - heading: where the hub's map knows this place better than the hall's own model, its offset out
+    # (the turn above is a difference over metres, which a map's errors from cell to cell would only add to)
+    angle = raw_angle
+    mapped = _trusted(settings, mag.map_var_rad2) if mag.map_var_rad2 > 0.0 else math.inf
+    if mapped < variance:
+        angle, variance = wrap(raw_angle - mag.map_offset_rad), mapped
+    if not mag.ready or mag.rejections >= settings.mag_recover_rejections:
+        # (re)learn north = angle + heading: it inherits the heading's error and all its correlations
+        mean, cov = mean.copy(), cov.copy()
+        mean[NORTH] = angle + mean[HEADING]
+        cov[NORTH, :] = cov[HEADING, :]
+        cov[:, NORTH] = cov[:, HEADING]
+        cov[NORTH, NORTH] = cov[HEADING, HEADING] + variance
+        return replace(mag, ready=True, rejections=0, since_update_m=0.0), mean, cov, flags
+    if since_update < correlation_m:  # the same stretch of disturbed field: nothing new about the heading
+        return mag, mean, cov, flags
+    innovation = wrap(angle - (mean[NORTH] - mean[HEADING]))
+    h = np.zeros(N)
+    h[NORTH], h[HEADING] = 1.0, -1.0
+    total = float(h @ cov @ h) + variance + _across(centre_spread, -math.sin(angle), math.cos(angle))
+    mag = replace(mag, innovation_deg=innovation / DEG, since_update_m=0.0)
+    if innovation * innovation / total > settings.mag_gate_chi2:
+        return replace(mag, rejections=mag.rejections + 1), mean, cov, flags | Flag.MAG_REJECTED
+    gain = cov @ h / total
+    return replace(mag, rejections=0), mean + gain * innovation, cov - np.outer(gain, h @ cov), flags | Flag.MAG_USED
+
+
+def _turn_update(settings: ChairSettings, mag: MagAid, angle: float, mean: np.ndarray, cov: np.ndarray,
+                 variance: float, correlation_m: float, centre_spread: tuple[float, float, float]
+                 ) -> tuple[np.ndarray, np.ndarray, Flag]:
+    """The gyro's bias and scale from the turn the field saw since the anchor reading.
+
+    The disturbance is the hall's, fixed in space: over little travel it hardly changes, so the
+    field turns by exactly the chair's turn, however disturbed it is (a pivot measures the gyro's
+    scale, a slow stretch its bias). Its change over `turn_m` of travel, 2 var (1 - exp(-d / L)),
+    is the measurement's noise."""
+    scale, bias = 1.0 + mean[GYRO_SCALE], mean[BIAS]
+    predicted = scale * (mag.turn_gyro_rad - bias * mag.turn_s)
+    seen = predicted + wrap(-(angle - mag.anchor_angle) - predicted)  # unwrapped near the gyro's turn
+    noise = (2.0 * variance * (1.0 - math.exp(-mag.turn_m / correlation_m)) + (settings.mag_turn_sd_deg * DEG) ** 2
+             + _across(centre_spread, math.sin(mag.anchor_angle) - math.sin(angle),
+                       math.cos(angle) - math.cos(mag.anchor_angle)))
+    h_bias, h_scale = -scale * mag.turn_s, mag.turn_gyro_rad - bias * mag.turn_s  # d predicted / d state
+    innovation = seen - predicted
+    row = h_bias * cov[BIAS] + h_scale * cov[GYRO_SCALE]  # h P
+    total = (h_bias * row[BIAS] + h_scale * row[GYRO_SCALE]) + noise
+    if innovation * innovation / total > settings.mag_gate_chi2:
+        return mean, cov, Flag.MAG_REJECTED
+    gain = (h_bias * cov[:, BIAS] + h_scale * cov[:, GYRO_SCALE]) / total  # P h / total
+    return mean + gain * innovation, cov - np.outer(gain, row), Flag.MAG_USED
+
+
+def _centre_spread(fit: np.ndarray, radius: float, variance: float) -> tuple[float, float, float]:
+    """(xx, xy, yy) covariance of the fitted circle's centre over its radius squared (rad^2).
+
+    The algebraic residual of a reading a relative distance e off the circle is 2 r^2 e, so the
+    least-squares centre has covariance r^2 var(e) S^-1 / w, S the readings' scatter and w their
+    weight: 2 var(e) / w on a full circle, more on a short arc."""
+    w = fit[2, 2]
+    mean_x, mean_y = fit[0, 2] / w, fit[1, 2] / w
+    sxx, sxy, syy = fit[0, 0] / w - mean_x * mean_x, fit[1, 0] / w - mean_y * mean_x, fit[1, 1] / w - mean_y * mean_y
+    scale = radius * radius * variance / (w * (sxx * syy - sxy * sxy))
+    return scale * syy, -scale * sxy, scale * sxx
+
+
+def _across(spread: tuple[float, float, float], nx: float, ny: float) -> float:
+    """The variance (rad^2) a centre of covariance `spread` adds to a field angle along (nx, ny)."""
+    return spread[0] * nx * nx + 2.0 * spread[1] * nx * ny + spread[2] * ny * ny
+
+
+def _learn_disturbance(settings: ChairSettings, stats: np.ndarray, radius: float, step_m: float) -> np.ndarray:
+    """The statistics after one more reading `step_m` from the last: a field of radius `radius` around the fit's centre.
+
+    A disturbance of the same size along and across the field (a building's is about isotropic)
+    changes the field's strength by as much, relative to it, as it turns it: the spread of the
+    strength measures the heading disturbance without knowing the heading. How fast successive
+    readings' strengths differ over the travel between them gives its correlation length."""
+    out = stats.copy()
+    forget = 1.0 - 1.0 / settings.mag_level_memory
+    radius_mean = out[M_RADIUS] / out[M_WEIGHT] if out[M_WEIGHT] > 0.0 else radius
+    residual = (radius - radius_mean) / radius_mean
+    if out[M_WEIGHT] > 0.0:
+        out[M_DIFF] = forget * out[M_DIFF] + (residual - out[M_LAST]) ** 2
+        out[M_STEP] = forget * out[M_STEP] + step_m
+    out[M_RADIAL] = forget * out[M_RADIAL] + residual * residual
+    out[M_RADIUS] = forget * out[M_RADIUS] + radius
+    out[M_WEIGHT] = forget * out[M_WEIGHT] + 1.0
+    out[M_LAST] = residual
+    return out
+
+
+def _trusted(settings: ChairSettings, variance: float) -> float:
+    """A disturbance's variance as the aid uses it: floored, and beyond `mag_trust_sd_deg` grown with
+    its square (chairs keep to a few places, so its errors do not average out as independent
+    readings would)."""
+    variance = max(variance, (settings.mag_floor_sd_deg * DEG) ** 2)
+    return variance * max(1.0, variance / (settings.mag_trust_sd_deg * DEG) ** 2)
+
+
+def mag_disturbance(settings: ChairSettings, stats: np.ndarray) -> tuple[float, float]:
+    """(heading variance rad^2, correlation length m) of the hall's field: learned, blended with the priors."""
+    prior_weight, weight = settings.mag_level_weight, stats[M_WEIGHT]
+    prior_var = (settings.mag_heading_sd_deg * DEG) ** 2
+    variance = _trusted(settings, (stats[M_RADIAL] + prior_weight * prior_var) / (weight + prior_weight))
+    correlation = settings.mag_correlation_prior_m
+    if weight > 1.0 and stats[M_RADIAL] > 0.0:
+        ratio = 0.5 * (stats[M_DIFF] / stats[M_RADIAL])  # 1 - exp(-step / L), exponential correlation
+        step = stats[M_STEP] / weight
+        learned = settings.mag_correlation_max_m if ratio <= 0.0 else (
+            settings.mag_correlation_min_m if ratio >= 1.0 else -step / math.log(1.0 - ratio))
+        learned = min(max(learned, settings.mag_correlation_min_m), settings.mag_correlation_max_m)
+        correlation = (weight * learned + prior_weight * correlation) / (weight + prior_weight)
+    return variance, correlation
+
+
+def _level(field: tuple[float, float, float], gravity: tuple[float, float, float]) -> tuple[float, float]:
+    """The field's horizontal part in chair forward/left axes, using the still-measured gravity."""
+    up = gravity
+    along_up = sum(f * u for f, u in zip(field, up))
+    horizontal = [f - along_up * u for f, u in zip(field, up)]
+    # forward axis levelled: chair x with its vertical part removed
+    forward = [1.0 - up[0] * up[0], -up[0] * up[1], -up[0] * up[2]]
+    norm = math.sqrt(sum(f * f for f in forward)) or 1.0
+    forward = [f / norm for f in forward]
+    left = [up[1] * forward[2] - up[2] * forward[1], up[2] * forward[0] - up[0] * forward[2],
+            up[0] * forward[1] - up[1] * forward[0]]
+    return (sum(h * f for h, f in zip(horizontal, forward)), sum(h * lv for h, lv in zip(horizontal, left)))
+
+
+def _fit_add(moments: np.ndarray, point: tuple[float, float], forget: float) -> np.ndarray:
+    vector = np.array([point[0], point[1], 1.0, point[0] ** 2 + point[1] ** 2])
+    return forget * moments + np.outer(vector, vector)
+
+
+def _fit_centre(moments: np.ndarray, min_spread: float, min_points: float) -> tuple[float, float] | None:
+    """Centre of the circle x^2 + y^2 = a x + b y + c fitted to the running moments.
+
+    None until the points spread around the circle: the smaller principal spread of the
+    points must reach `min_spread` of the radius (a full circle gives 1/sqrt(2) = 0.71).
+    """
+    weight = moments[2, 2]
+    if weight < min_points:
+        return None
+    mean = moments[:2, 2] / weight
+    scatter = moments[:2, :2] / weight - np.outer(mean, mean)
+    try:
+        a, b, c = np.linalg.solve(moments[:3, :3], moments[:3, 3])
+    except np.linalg.LinAlgError:
+        return None
+    centre = (float(a) / 2.0, float(b) / 2.0)
+    radius_sq = c + centre[0] ** 2 + centre[1] ** 2
+    smallest = float(np.linalg.eigvalsh(scatter)[0])
+    if radius_sq <= 0.0 or 2.0 * smallest < min_spread**2 * radius_sq:
+        return None
+    return centre
