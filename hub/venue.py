@@ -21,6 +21,8 @@ from hub.pedestrian.hub import PedestrianHub
 from protocol import keys, messages
 from protocol.session import Session
 
+_TRACK_IDENTITY = messages.CLASSES["TrackIdentity"]
+
 
 class VenueHub:
     def __init__(self, session: Session, settings: HubSettings = HubSettings(),
@@ -69,7 +71,7 @@ class VenueHub:
         return self.chairs.flush() + self.pedestrians.flush()
 
     def key_for(self, message: Any) -> str:
-        if messages.type_name(message) == "TrackIdentity":
+        if type(message) is _TRACK_IDENTITY:
             return keys.identity(self.session.venue.name, message.agent_id)
         if message.agent_id in self.pedestrians.agents:
             return self.pedestrians.key_for(message)

@@ -9,6 +9,8 @@ moved; a look-up takes the last pose not after the time, searching from the newe
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 SCAN = 8  # poses looked at one by one from the newest before a vectorised search (most look-ups are recent)
@@ -26,8 +28,8 @@ class PoseHistory:
     def __len__(self) -> int:
         return self.end - self.start
 
-    def append(self, time_ns: int, x: float, y: float, covariance: np.ndarray, heading_rad: float) -> None:
-        """A live pose; `covariance` the edge's 3 x 3 (its position block is kept)."""
+    def append(self, time_ns: int, x: float, y: float, covariance: Sequence[float], heading_rad: float) -> None:
+        """A live pose; `covariance` the edge's 3 x 3, row-major (its position block is kept)."""
         if self.end == len(self.time_ns):
             keep = slice(max(self.start, self.end - self.capacity + 1), self.end)
             count = keep.stop - keep.start
@@ -37,7 +39,7 @@ class PoseHistory:
         elif self.end - self.start == self.capacity:
             self.start += 1
         self.time_ns[self.end] = time_ns
-        self.rows[self.end] = (x, y, covariance[0, 0], covariance[0, 1], covariance[1, 0], covariance[1, 1], heading_rad)
+        self.rows[self.end] = (x, y, covariance[0], covariance[1], covariance[3], covariance[4], heading_rad)
         self.end += 1
 
     def clear(self) -> None:

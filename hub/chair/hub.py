@@ -71,6 +71,7 @@ _EYE2 = np.eye(2)  # read only
 PUSH_GATE_COS = math.cos(math.radians(60.0))  # both headings' errors, and pushes off the line between centres
 PUSH_LINE_SD = math.radians(20.0)  # spread of the pushes' line about the centres' (both headings, glancing contacts)
 _EstimatedPose = messages.EstimatedPose
+_IDENTITY = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]  # a pose's covariance when it came without one
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,7 @@ class HubCounters:
     pushes_not_opposed: int = 0  # impact pairs whose pushes did not point opposite ways: no contact
     relocks: int = 0  # video fixes taken after a run of consistent refusals
     late_impacts: int = 0  # arrived after their window had closed: paired with later ones only
+    refined_unbuilt: int = 0  # refined poses not made into messages: nobody wanted the track (`refined_wanted`)
 
 
 class ChairHub:
@@ -132,9 +134,12 @@ class ChairHub:
             if agent.kind is not AgentKind.WHEELCHAIR:
                 continue  # a swimmer's lengths need no venue-level correction (reckon/processes/hub.py shows them)
             seat = agent.sensor(Mount.SEAT)
-            self.agents[agent.id] = AgentView(agent.id, seat.id if seat else "", FixedLagSmoother(settings.lag_s, ring),
-                                              live_key=keys.pose(self.venue, agent.id, "live"),
-                                              refined_key=keys.pose(self.venue, agent.id, "refined"))
+            self.agents[agent.id] = AgentView(
+                agent.id, seat.id if seat else "", FixedLagSmoother(settings.lag_s, ring),
+                live_key=keys.pose(self.venue, agent.id, "live"), refined_key=keys.pose(self.venue, agent.id, "refined"),
+                pose_fields={track: _EstimatedPose(schema_version=messages.SCHEMA_VERSION, agent_id=agent.id,
+                                                   method="reckon", track=track)
+                             for track in (messages.Track.LIVE, messages.Track.REFINED)})
         self.impacts: deque[tuple[int, str]] = deque(maxlen=256)
         self.closed_until_ns = -1
         self.newest_arrival_ns = 0
@@ -146,6 +151,9 @@ class ChairHub:
         # so a snapshot restored and caught up (reckon/processes/checkpoint.py) would pickle differently.
         self._short: dict[str, None] = {}
         self.counters = HubCounters()
+        # Whether anyone takes the refined track (a subscriber, a recording: the hub process says, as it
+        # learns): when nobody does, its poses still pass through the smoothers, never into messages.
+        self.refined_wanted = True
 
     # -- inputs ------------------------------------------------------------------------------
 
@@ -200,23 +208,25 @@ class ChairHub:
             x, y = float(xy[0]), float(xy[1])
         else:  # the usual case; + 0.0 as the sum above adds (it turns -0.0 into 0.0)
             x, y = edge_x + 0.0, edge_y + 0.0
-        # A slice of the repeated field converts to an array twice as fast as the field itself.
-        covariance = np.array(pose.covariance[:], dtype=float).reshape(3, 3) if len(pose.covariance) == 9 else np.eye(3)
-        view.covariance = covariance
+        values = pose.covariance[:]  # the 3 x 3 as floats (a slice of the repeated field: a list)
+        if len(values) != 9:
+            values = _IDENTITY
+        view.covariance = np.array(values, dtype=float).reshape(3, 3)
         self._grow_extra(view, time_ns, edge_x, edge_y, sequence)
         if view.latest_ns is None or time_ns > view.latest_ns:
             view.latest_ns = time_ns
-        honest = covariance.ravel().tolist()  # + extra on the position block, in floats: one small array op less
+        honest = list(values)  # + extra on the position block, in floats: one small array op less
         e00, e01, e10, e11 = view.extra.ravel().tolist()
         honest[0] += e00
         honest[1] += e01
         honest[3] += e10
         honest[4] += e11
-        view.history.append(time_ns, x, y, covariance, heading)
+        view.history.append(time_ns, x, y, values, heading)
         view.poses += 1
         out = [self._pose_message(view, time_ns, x, y, heading, honest, messages.Track.LIVE)]
-        for entry in view.smoother.add(time_ns, x, y, heading, covariance):
-            out.append(self._refined(view, entry))
+        refined = view.smoother.add(time_ns, x, y, heading, values)
+        if refined:
+            out += self._refined(view, refined)
         if view.passes or view.ended or view.fixes:
             out += self._end_passes(view)
         if self.impacts:
@@ -297,7 +307,7 @@ class ChairHub:
     def flush_by_agent(self) -> Iterator[list[Any]]:
         """`flush`, one agent at a time: a whole venue's tracks at once are gigabytes (500 chairs x 30 s)."""
         for view in self.agents.values():
-            yield [self._refined(view, entry) for entry in view.smoother.flush()]
+            yield self._refined(view, view.smoother.flush())
 
     # -- corrections ---------------------------------------------------------------------------
 
@@ -507,22 +517,30 @@ class ChairHub:
                             dx_m=float(measured[0]), dy_m=float(measured[1]), other_agent_id=other, source_id=source,
                             sequence=view.sequence, covariance=covariance.ravel().tolist())
 
-    def _refined(self, view: AgentView, entry: tuple) -> Any:
-        time_ns, x, y, heading, covariance = entry
-        return self._pose_message(view, time_ns, x, y, heading, covariance, messages.Track.REFINED)
+    def _refined(self, view: AgentView, entries: list[tuple]) -> list[Any]:
+        """The smoother's (time, x, y, heading, covariance) entries as refined poses, if anyone wants them."""
+        if not self.refined_wanted:
+            self.counters.refined_unbuilt += len(entries)
+            return []
+        return [self._pose_message(view, time_ns, x, y, heading, covariance, messages.Track.REFINED)
+                for time_ns, x, y, heading, covariance in entries]
 
     def _pose_message(self, view: AgentView, time_ns: int, x: float, y: float, heading: float,
                       covariance: list[float], track: messages.Track) -> Any:
-        return _EstimatedPose(schema_version=messages.SCHEMA_VERSION, timestamp_ns=time_ns, agent_id=view.agent_id,
-                              x_m=x, y_m=y, heading_rad=heading, covariance=covariance, method="reckon", track=track,
-                              correction_sequence=view.sequence)
+        """Its fixed fields copied from the agent's own (a third cheaper than naming them each time)."""
+        message = _EstimatedPose()
+        message.CopyFrom(view.pose_fields[track])
+        message.timestamp_ns, message.x_m, message.y_m, message.heading_rad = time_ns, x, y, heading
+        message.covariance.extend(covariance)
+        message.correction_sequence = view.sequence
+        return message
 
     def key_for(self, message: Any) -> str:
         """Where an output message goes on the bus."""
-        name = messages.type_name(message)
-        if name == "EstimatedPose":  # two a pose: each agent's pose keys are made once
+        if type(message) is _EstimatedPose:  # two a pose: each agent's pose keys are made once
             view = self.agents[message.agent_id]
             return view.refined_key if message.track == messages.Track.REFINED else view.live_key
+        name = messages.type_name(message)
         if name == "Correction":
             return keys.correction(self.venue, message.agent_id)
         if name == "FieldMap":

@@ -24,6 +24,8 @@ operations over that slice instead of a Python loop over up to 1,500 poses.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 # Columns of `rows`: the live pose, its covariance, q and p of the recursion above, delta.
@@ -40,14 +42,15 @@ class FixedLagSmoother:
         self.time_ns = np.zeros(2 * max_entries, dtype=np.int64)
         self.rows = np.zeros((2 * max_entries, _COLUMNS))
         self.start = self.end = 0
+        self.newest_ns = 0  # time_ns[end - 1] while any is held, as an int (a numpy read per pose less)
 
     def __len__(self) -> int:
         return self.end - self.start
 
-    def add(self, time_ns: int, x: float, y: float, heading_rad: float, covariance: np.ndarray) -> list[tuple]:
-        """A live pose (`covariance` 3 x 3); returns the (time_ns, x, y, heading, covariance 9 floats)
-        poses that reached the lag."""
-        if self.end > self.start and time_ns <= self.time_ns[self.end - 1]:
+    def add(self, time_ns: int, x: float, y: float, heading_rad: float, covariance: Sequence[float]) -> list[tuple]:
+        """A live pose (`covariance` its 3 x 3, row-major: 9 floats); returns the (time_ns, x, y, heading,
+        covariance 9 floats) poses that reached the lag."""
+        if self.end > self.start and time_ns <= self.newest_ns:
             return []  # out of order: the live pose was published, the refined track skips it
         out = []
         if self.end - self.start == self.max_entries:
@@ -59,10 +62,10 @@ class FixedLagSmoother:
             self.time_ns[:count] = self.time_ns[held]
             self.rows[:count] = self.rows[held]
             self.start, self.end = 0, count
-        variance = 0.5 * float(covariance[0, 0] + covariance[1, 1])
+        variance = 0.5 * (covariance[0] + covariance[4])
         k = self.end
-        self.time_ns[k] = time_ns
-        self.rows[k] = (x, y, heading_rad, *covariance.flat, variance, variance, 0.0, 0.0)
+        self.time_ns[k] = self.newest_ns = time_ns
+        self.rows[k] = (x, y, heading_rad, *covariance, variance, variance, 0.0, 0.0)
         self.end += 1
         while self.end > self.start and time_ns - int(self.time_ns[self.start]) >= self.lag_ns:
             out.append(self._emit(self.start))
@@ -99,6 +102,5 @@ class FixedLagSmoother:
         return out
 
     def _emit(self, k: int) -> tuple:
-        row = self.rows[k]
-        return (int(self.time_ns[k]), float(row[X] + row[OFFSET]), float(row[Y] + row[OFFSET + 1]), float(row[HEADING]),
-                row[COV:COV + 9].tolist())
+        row = self.rows[k].tolist()  # one conversion, then float arithmetic (the same bits as numpy's)
+        return (int(self.time_ns[k]), row[X] + row[OFFSET], row[Y] + row[OFFSET + 1], row[HEADING], row[COV:COV + 9])

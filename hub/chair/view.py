@@ -49,6 +49,7 @@ class AgentView:
     refused: list = field(default_factory=list)  # ... as [(time, offset)]
     live_key: str = ""  # where its live and refined poses go (ChairHub.key_for)
     refined_key: str = ""
+    pose_fields: dict = field(default_factory=dict)  # per track, an EstimatedPose holding what every one of its poses shares
 
     def pose_at(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """Live position and its covariance at `time_ns` (the last pose not after it; the first if none)."""

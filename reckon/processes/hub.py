@@ -4,7 +4,9 @@ One subscription to the agents' input streams (`reckon.transport.bus.PolledSubsc
 the hub's thread; a slow hub's full FIFOs slow the edges down, it never loses a measurement) feeds `hub.venue.VenueHub` (chairs' corrections, pedestrians' map matching, camera identities) on one
 thread, in arrival order. Its
 outputs go out at once: live poses on `reckon/<venue>/<agent>/pose/live`, refined ones on
-`.../pose/refined`, corrections to the edges on `.../correction`. A swimmer's lengths
+`.../pose/refined`, corrections to the edges on `.../correction`; a pose track only while someone
+subscribes to it (recorded either way), and the refined track, when nobody takes it and nothing
+records it, not even made into messages (`ChairHub.refined_wanted`). A swimmer's lengths
 (`.../length`, from its edge) are recorded, logged as they come and totalled in the summary. With `output`, every input and
 every output is written to a session log (MCAP) as it passes, with the hub's clock as log time.
 
@@ -220,6 +222,7 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
                 continue
             if batch is None:
                 break
+            hub.chairs.refined_wanted = bool(writer or on_output or refined_heard.matching)
             if time.monotonic() >= next_clock_check:
                 ask_raw_clocks()
                 next_clock_check = time.monotonic() + CLOCK_CHECK_S
@@ -259,12 +262,14 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
                     next_flush = time.monotonic() + FLUSH_EVERY_S
         if state is not None:  # before the final flush: a hub restarted from it carries on the session
             _checkpoint(state, writer, output, hub_state.HubState(hub, dedup, output.name, recorded))
+        hub.chairs.refined_wanted = bool(writer or on_output or refined_heard.matching)
         for part in hub.chairs.flush_by_agent():  # one agent's refined track at a time, not the venue's at once
             emit(part)
         emit(hub.flush())  # the rest (pedestrians); the chairs' smoothers are empty now
         summary.full_waits = subscription.stats.full_waits
     summary.corrections = {view.agent_id: dict(view.applied) for view in hub.agents.values()}
     summary.pairs = hub.counters.pairs
+    summary.unheard += hub.chairs.counters.refined_unbuilt
     summary.duplicates, summary.stale = dedup.counters.duplicates, dedup.counters.stale
     summary.walkers = {view.agent_id: view.describe() for view in hub.pedestrians.agents.values() if view.poses}
     levels = hub.chairs.beacon_levels

@@ -198,7 +198,7 @@ def test_refined_track_takes_a_share_of_a_later_correction():
 
 def test_smoother_memory_is_bounded():
     smoother = FixedLagSmoother(lag_s=1.0, max_entries=52)
-    cov = np.eye(3)
+    cov = np.eye(3).ravel().tolist()
     arrays = smoother.time_ns.nbytes + smoother.rows.nbytes
     for k in range(10_000):
         smoother.add(k * 20_000_000, 0.0, 0.0, 0.0, cov)

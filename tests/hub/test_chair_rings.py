@@ -62,7 +62,7 @@ def test_the_smoother_gives_the_loops_refined_poses_exactly(seed):
         sd = rng.uniform(0.05, 2.0)
         cov = np.diag([sd * sd, sd * sd * rng.uniform(0.5, 2), 0.01])
         x, y, heading = rng.normal(0, 10, 3)
-        out_ring += ring.add(t, x, y, heading, cov)
+        out_ring += ring.add(t, x, y, heading, cov.ravel().tolist())
         out_loop += loop.add(t, x, y, heading, cov)
         if rng.random() < 0.05:  # a correction measured now, a little earlier, or before every held pose
             measured = t - int(rng.choice([0, 200, 900, 5000])) * MS
@@ -78,7 +78,7 @@ def test_the_smoother_gives_the_loops_refined_poses_exactly(seed):
 def test_a_correction_with_no_variance_before_stops_at_that_pose():
     smoother = FixedLagSmoother(10.0, 600)
     for k in range(5):
-        smoother.add(k * 20 * MS, 0.0, 0.0, 0.0, np.zeros((3, 3)) if k == 2 else np.eye(3))
+        smoother.add(k * 20 * MS, 0.0, 0.0, 0.0, [0.0] * 9 if k == 2 else np.eye(3).ravel().tolist())
     smoother.correct(4 * 20 * MS, np.array([1.0, -1.0]), 0.5)
     offsets = [(x, y) for _, x, y, _, _ in smoother.flush()]
     assert offsets[4] == (1.0, -1.0)  # the measured pose takes the whole shift
@@ -94,7 +94,7 @@ def test_the_history_looks_up_as_a_scan_of_the_last_poses_does():
         t += int(rng.choice([20, 20, -30, 500])) * MS  # a clock offset that moved makes poses go back in time
         cov = np.array([[rng.uniform(0.1, 1), 0.1, 0], [0.1, rng.uniform(0.1, 1), 0], [0, 0, 0.01]])
         x, y, heading = rng.normal(0, 10, 3)
-        history.append(t, x, y, cov, heading)
+        history.append(t, x, y, cov.ravel().tolist(), heading)
         reference.append((t, x, y, cov[:2, :2].copy(), heading))
         assert len(history) == len(reference)
         for asked in (t, t - 10 * MS, t - int(rng.uniform(0, 2000)) * MS, t - 10**12):
@@ -112,8 +112,8 @@ def test_the_rings_do_not_grow():
     smoother, history = FixedLagSmoother(0.5, 27), PoseHistory(16)
     sizes = (smoother.rows.nbytes, smoother.time_ns.nbytes, history.rows.nbytes, history.time_ns.nbytes)
     for k in range(5000):
-        smoother.add(k * 20 * MS, 1.0, 2.0, 0.0, np.eye(3))
-        history.append(k * 20 * MS, 1.0, 2.0, np.eye(3), 0.0)
+        smoother.add(k * 20 * MS, 1.0, 2.0, 0.0, np.eye(3).ravel().tolist())
+        history.append(k * 20 * MS, 1.0, 2.0, np.eye(3).ravel().tolist(), 0.0)
     assert len(smoother) <= 27 and len(history) == 16
     assert (smoother.rows.nbytes, smoother.time_ns.nbytes, history.rows.nbytes, history.time_ns.nbytes) == sizes
     history.clear()

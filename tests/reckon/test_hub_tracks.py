@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import threading
 
+import pytest
+
 from hub.chair.hub import HubSettings
 from protocol import bus as wire
 from protocol import keys, messages
@@ -30,13 +32,17 @@ def edge_pose(k: int):
                         covariance=[0.25, 0, 0, 0, 0.25, 0, 0, 0, 0.01], method="reckon", track=messages.Track.LIVE)
 
 
-def test_the_refined_track_goes_out_only_once_someone_subscribes_to_it(free_endpoint, tmp_path):
+@pytest.mark.parametrize("recorded", [True, False])
+def test_the_refined_track_goes_out_only_once_someone_subscribes_to_it(free_endpoint, tmp_path, recorded):
+    """Recorded, every refined pose is made (and recorded); not recorded, those nobody subscribed to are
+    not even made, and the summary counts them all the same."""
     endpoint, stop, ready = free_endpoint(), threading.Event(), threading.Event()
     summaries, made = [], []
 
     def hub() -> None:
         summaries.append(run_hub(zenoh_config(listen=[endpoint]), SESSION, stop, HubSettings(lag_s=1.0),
-                                 output=tmp_path / "hub.mcap", ready=ready, on_output=made.append))
+                                 output=tmp_path / "hub.mcap" if recorded else None, ready=ready,
+                                 on_output=made.append if recorded else None))
 
     thread = threading.Thread(target=hub, daemon=True)
     thread.start()
@@ -64,12 +70,16 @@ def test_the_refined_track_goes_out_only_once_someone_subscribes_to_it(free_endp
         stop.set()
         thread.join(WAIT_S)
     assert not thread.is_alive()
-    made_refined = [m for m in made if m.track == messages.Track.REFINED]
-    assert len(made_refined) == 400  # every pose is refined, the last second's at the stop
     summary = summaries[0]
     assert summary.unheard >= 150  # at least what left the lag before anyone subscribed
-    assert len(heard) == len(made_refined) - summary.unheard > 0
-    assert [m.timestamp_ns for m in heard] == [m.timestamp_ns for m in made_refined[-len(heard):]]
-    recorded = [m for _, topic, m in LogMessages(tmp_path / "hub.mcap") if topic == refined_key]
-    assert len(recorded) == 400  # the recording holds the whole track
     assert f"{summary.unheard} poses of a track nobody subscribed to" in str(summary)
+    assert len(heard) == 400 - summary.unheard > 0  # every pose is refined, the last second's at the stop
+    if not recorded:  # made: a live pose per pose, the refined ones heard
+        assert summary.outputs == 400 + len(heard)
+        assert [m.timestamp_ns for m in heard] == [edge_pose(k).timestamp_ns for k in range(400 - len(heard), 400)]
+        return
+    made_refined = [m for m in made if m.track == messages.Track.REFINED]
+    assert len(made_refined) == 400
+    assert [m.timestamp_ns for m in heard] == [m.timestamp_ns for m in made_refined[-len(heard):]]
+    recording = [m for _, topic, m in LogMessages(tmp_path / "hub.mcap") if topic == refined_key]
+    assert len(recording) == 400  # the recording holds the whole track
