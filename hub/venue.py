@@ -21,7 +21,7 @@ from hub.pedestrian.hub import PedestrianHub
 from protocol import keys, messages
 from protocol.session import Session
 
-_TRACK_IDENTITY = messages.CLASSES["TrackIdentity"]
+_TRACK_IDENTITY, _CAMERA_FRAME = messages.CLASSES["TrackIdentity"], messages.CLASSES["CameraFrame"]
 
 
 class VenueHub:
@@ -44,19 +44,19 @@ class VenueHub:
         return self.chairs.counters
 
     def on_message(self, message: Any, arrival_ns: int) -> list[Any]:
-        name = messages.type_name(message)
-        if name == "CameraFrame" and self.identity is None and "camera" in self.chairs.settings.corrections:
+        camera = type(message) is _CAMERA_FRAME
+        if camera and self.identity is None and "camera" in self.chairs.settings.corrections:
             self.identity = IdentityEngine(self.session, self.identity_settings, pose_of=self._pose_of,
                                            clock=self.clock)
         if self.identity is None:  # the usual case
-            return self._to_its_kind(message, arrival_ns) if name != "CameraFrame" else []
+            return [] if camera else self._to_its_kind(message, arrival_ns)
         out: list[Any] = []
         for produced in self.identity.on_message(message):
             if messages.type_name(produced) == "PositionFix":
                 out += self.chairs.on_message(produced, arrival_ns)  # [] for an agent that is not a chair
             else:
                 out.append(produced)
-        if name != "CameraFrame":
+        if not camera:
             out += self._to_its_kind(message, arrival_ns)
         return out
 

@@ -154,6 +154,7 @@ class ChairHub:
         # Whether anyone takes the refined track (a subscriber, a recording: the hub process says, as it
         # learns): when nobody does, its poses still pass through the smoothers, never into messages.
         self.refined_wanted = True
+        self._pass_end_ns = settings.pass_end_s * 1e9
 
     # -- inputs ------------------------------------------------------------------------------
 
@@ -163,15 +164,15 @@ class ChairHub:
         Arrival times only tell a silent agent from a slow one: an agent whose last message came
         `stale_s` before the newest arrival no longer holds the collision pairing back.
         """
-        name = messages.type_name(message)
         view = self.agents.get(message.agent_id)
         if view is None:
             return []
         view.arrival_ns = arrival_ns
         if arrival_ns > self.newest_arrival_ns:
             self.newest_arrival_ns = arrival_ns
-        if name == "EstimatedPose":  # most inputs
+        if type(message) is _EstimatedPose:  # most inputs
             return self.on_pose(message)
+        name = messages.type_name(message)
         if name == "ClockSample":
             self.clocks.observe(message.sensor_id, message.timestamp_ns, message.received_ns)
             return []
@@ -270,7 +271,7 @@ class ChairHub:
         view = self.agents[sighting.agent_id]
         time_ns = self.clocks.to_venue(sighting.sensor_id or view.seat_id, sighting.timestamp_ns)
         current = view.passes.get(sighting.beacon_id)
-        if current is not None and time_ns - current.last_ns > self.settings.pass_end_s * 1e9:
+        if current is not None and time_ns - current.last_ns > self._pass_end_ns:
             view.ended.append((sighting.beacon_id, view.passes.pop(sighting.beacon_id)))
             current = None
         if current is None:
@@ -320,8 +321,9 @@ class ChairHub:
         if view.latest_ns is None:
             return []
         if view.passes:
+            latest_ns, end_ns = view.latest_ns, self._pass_end_ns
             for beacon_id, current in list(view.passes.items()):
-                if view.latest_ns - current.last_ns > self.settings.pass_end_s * 1e9:
+                if latest_ns - current.last_ns > end_ns:
                     view.ended.append((beacon_id, view.passes.pop(beacon_id)))
         out = []
         while view.ended and view.ended[0][1].peak_ns <= view.latest_ns:

@@ -37,7 +37,7 @@ from hub.chair.hub import HubSettings
 from hub.dedup import Deduplicator, Verdict
 from hub.venue import VenueHub
 from protocol import bus as wire
-from protocol import keys
+from protocol import keys, messages
 from protocol.errors import ConfigError, InputError
 from protocol.session import Session
 from protocol.session_log import LogMessages, SessionWriter
@@ -55,6 +55,7 @@ INPUTS = ("clock/*", "beacon/*", "pose/edge", "event/impact", "event/scan", "fix
 RAW_IMU = "imu/*"
 CLOCK_CHECK_S = 1.0  # how often the hub looks for agents sending poses but no clock samples
 CLOCKLESS_POSES = 100  # ... with this many poses (2 s at 50 Hz: an edge's first ClockSample goes with its first batch)
+SWIM_LENGTH = messages.CLASSES["SwimLength"]
 LIVE, REFINED = "/pose/live", "/pose/refined"  # the ends of the two pose tracks' keys (protocol.keys.pose)
 WARN_EVERY_S = 10.0
 SNAPSHOT_EVERY_S = 2.0  # a restarted hub re-applies at most this much of its recording
@@ -197,7 +198,7 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
             return live_heard.matching or not key.endswith(LIVE)  # corrections and the rest: always
 
         def emit(outputs: list[Any]) -> None:
-            now = time.time_ns()
+            now = time.time_ns() if writer else 0
             for out in outputs:
                 key = hub.key_for(out)
                 if heard(key):
@@ -239,7 +240,7 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
                     if on_input:
                         on_input(message)
                     summary.inputs += 1
-                    if message.DESCRIPTOR.name == "SwimLength":
+                    if type(message) is SWIM_LENGTH:
                         line = summary.swims.setdefault(message.sensor_id, SwimTotals()).add(message)
                         log.info("%s %s", message.sensor_id, line)
                         if on_output:
