@@ -62,6 +62,7 @@ class ChairEdge:
         self.correction_sequence = 0
         self.samples = self.poses = self.impacts = self.corrections_applied = 0
         self.axle_check = Flag.NONE  # the seat gyro's one scale check against the axle IMUs, once made
+        self.axle_pending = True  # ... not yet made (a bool: read per batch)
         self.map: tuple[float, float, float, np.ndarray, np.ndarray] | None = None  # origin, cell, offsets, variances
         self.field_count = 0  # the aid's readings published so far
         self.maps_taken = self.maps_refused = 0
@@ -151,14 +152,18 @@ class ChairEdge:
     def _step(self, merge_arguments: tuple) -> list[Any]:
         """One batch merged and its samples through the filter, a pose at each pose time; until the
         filter has started (its first merged sample), the two steps apart."""
-        if self.vector is not None:
-            self._apply_corrections()
-            if self.map is not None or self.vector[layout.MAP_VAR] != 0.0:
+        vector = self.vector
+        if vector is not None:  # per batch: each step here costs a share of the push path's ~18 us
+            if self.corrections:
+                self._apply_corrections()
+                vector = self.vector
+            if self.map is not None or vector[layout.MAP_VAR] != 0.0:
                 self._look_up_map()
             merged, flags, self.next_pose_ns, posed, times, rows = self.kernels.merge_and_run(
-                *merge_arguments, self.packed_settings, self.vector, self.next_pose_ns, self.period_ns)
+                *merge_arguments, self.packed_settings, vector, self.next_pose_ns, self.period_ns)
             self.samples += merged
-            return self._publish(flags, posed, times, rows) + self._field_reading()
+            out = self._publish(flags, posed, times, rows)
+            return out + self._field_reading() if vector[layout.FIELD_COUNT] != self.field_count else out
         times, values = self.kernels.merge_batch(*merge_arguments)
         if not len(times):
             return []
@@ -196,12 +201,9 @@ class ChairEdge:
         self.vector[layout.MAP_OFFSET], self.vector[layout.MAP_VAR] = offset, variance
 
     def _field_reading(self) -> list[Any]:
-        """The aid's newest reading for the hub's map, if it made one in this batch (readings come at
-        most every `mag_period_s`: of two in one batch, the later goes)."""
-        count = int(self.vector[layout.FIELD_COUNT])
-        if count == self.field_count:
-            return []
-        self.field_count = count
+        """The aid's newest reading for the hub's map, made in this batch (readings come at most every
+        `mag_period_s`: of two in one batch, the later goes)."""
+        self.field_count = int(self.vector[layout.FIELD_COUNT])
         v = self.vector
         time_ns = (int(v[layout.FIELD_TIME_HIGH]) << 32) + int(v[layout.FIELD_TIME_LOW])
         return [messages.new("FieldReading", timestamp_ns=time_ns, agent_id=self.agent.id, x_m=float(v[layout.FIELD_X]), y_m=float(v[layout.FIELD_Y]),
@@ -211,9 +213,10 @@ class ChairEdge:
         """A kernel call's poses and impacts (times and rows as run_poses hands them; the state
         already advanced) out as messages."""
         out: list[Any] = []
-        if not self.axle_check and self.vector[layout.AXLE_DONE]:  # made in this call: its flag is here
+        if self.axle_pending and self.vector[layout.AXLE_DONE]:  # made in this call: its flag is here
+            self.axle_pending = False
             self._note_axle_check(Flag(int(flags)))
-        if not len(times):  # a wheel's batch, most often: its seat samples were released before
+        if not len(times):  # nothing released (a batch whose samples wait for another sensor's)
             return out
         times, rows = times.tolist(), rows.tolist()
         impacts = [self._impact(time_ns, row) for time_ns, row in zip(times[posed:], rows[posed:])]
