@@ -114,6 +114,7 @@ def run_load(out: Path, agents: int = 500, rate_hz: float = 50.0, duration_s: fl
     result = results(out, spec, hub_children, children, at_start, at_end, rss_mb, warmup_s, margin_s)
     machine["load_average_at_end"] = list(os.getloadavg())
     result["machine"] = machine
+    result["recorded"] = record  # the hub's own recording (-o) costs it CPU per input (docs/benchmarks.md)
     return result
 
 

@@ -121,7 +121,8 @@ def format_load(result: dict[str, Any]) -> str:
                                                   for name, h in d["hubs"].items()) + "\n")
     return "\n".join([
         f"reckon bench load: {result['agents']} chairs at {result['rate_hz']:g} Hz, {result['duration_s']:g} s"
-        f"{'' if hubs == 1 else f', {hubs} hubs (courts sharded)'}; {m['cpu']}, {m['cores']} cores, Python {m['python']}",
+        f"{'' if hubs == 1 else f', {hubs} hubs (courts sharded)'}"
+        f"{', recording' if result.get('recorded') else ''}; {m['cpu']}, {m['cores']} cores, Python {m['python']}",
         f"hub CPU                 {result['hub_cpu_cores']:6.2f} cores    target <= {hubs}     "
         f"{verdict(result['hub_cpu_cores'] <= hubs and result['kept_up'])}   (over {d['window_s']:.0f} s of steady state)",
         f"{each}  {keeping}",

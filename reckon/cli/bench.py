@@ -13,7 +13,7 @@ def run_bench_command(args: argparse.Namespace, progress: Callable[[str], None])
         from reckon.bench.load import format_load, run_load
 
         result = run_load(Path(args.out) / "load", agents=args.agents, rate_hz=args.rate, duration_s=args.duration,
-                          seed=args.seed, progress=progress, hubs=args.hubs)
+                          seed=args.seed, progress=progress, hubs=args.hubs, record=args.record)
         print(json.dumps(result, indent=1) if args.json else format_load(result))
         return 0
     if args.suite == "soak":
@@ -51,6 +51,8 @@ def register(sub: Any) -> None:
     bench.add_argument("--hubs", type=int, default=1,
                        help="load: hubs, the courts sharded among them, each its own venue (default 1)")
     bench.add_argument("--rate", type=float, default=50.0, metavar="HZ", help="load: poses per chair a second (default 50)")
+    bench.add_argument("--record", action="store_true",
+                       help="load: each hub records every input and output (-o), as the installed hub does")
     bench.add_argument("--hours", type=float, default=1.0, help="soak: hours of game replayed (default 1)")
     bench.add_argument("--seed", type=int, default=1)
     bench.add_argument("--latency-players", type=int, metavar="N", help="chairs in the paced latency run (default: --players)")

@@ -12,6 +12,7 @@ import pytest
 from hub.chair.hub import ChairHub, HubSettings
 from protocol import messages
 from protocol.errors import ReckonError
+from protocol.session_log import LogMessages
 from reckon.bench.load import run_load
 from reckon.bench.load_report import format_load
 from reckon.bench.load_spec import COURT_AGENTS, LoadSpec, contacts, load_session
@@ -56,6 +57,17 @@ def test_two_hubs_share_the_courts_and_nothing_is_dropped(tmp_path):
     assert [hubs[name]["outputs"] >= poses for name, poses in (("hub1", 20 * 40), ("hub2", 10 * 40))] == [True, True]
     assert sum(h["inputs"] for h in hubs.values()) == details["hub"]["inputs"] == details["hub_expected_inputs"]
     assert "2 hubs (courts sharded)" in format_load(result)
+
+
+def test_a_recording_hub_records_every_input_and_both_tracks(tmp_path):
+    result = run_load(tmp_path, agents=6, rate_hz=20.0, duration_s=2.0, progress=lambda line: None, record=True)
+    assert result["recorded"] and result["dropped"] == 0 and "recording" in format_load(result)
+    counts = {"edge": 0, "live": 0, "refined": 0}
+    for _, topic, message in LogMessages(tmp_path / "hub.mcap"):
+        if messages.type_name(message) == "EstimatedPose":
+            counts[topic.rsplit("/", 1)[-1]] += 1
+    poses = result["details"]["generated"]["poses"]
+    assert counts == {"edge": poses, "live": poses, "refined": poses}  # the refined track made: it is recorded
 
 
 def test_more_hubs_than_courts_is_refused():
