@@ -98,8 +98,9 @@ def run_poses(settings: np.ndarray, state: np.ndarray, times: np.ndarray, values
     publishes them, `state` advanced in place: (the flags of every sample OR-ed, the next pose time,
     the number of poses, times: the poses', then the impacts'; rows: the poses' (x, y, heading,
     their 3 x 3 covariance row-major: POSE_WIDTH), then the impacts' (accel, then gravity at the end
-    of their run: IMPACT_WIDTH, in the first columns)). Two arrays, not four: each array handed back
-    costs the ahead-of-time compiled call ~0.7 us, a sixth of an edge's push path per batch. A pose
+    of their run: IMPACT_WIDTH, in the first columns)). Two arrays and the state in place, because
+    each array handed back costs the ahead-of-time compiled call ~0.7 us (an edge's whole push path
+    is ~18 us a batch: docs/benchmarks.md). A pose
     is due at a sample at or after `next_pose_ns`; the next then at +period, or half a period before
     the sample that came late (a fixed schedule: timestamp jitter costs no pose). One call per batch
     instead of one per pose; the runs are the same, so the same bits (run_batch splits anywhere)."""
