@@ -192,6 +192,11 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
         live_heard = stack.enter_context(Listened(bus, keys.all_agents(venue, "pose/live")))
         refined_heard = stack.enter_context(Listened(bus, keys.all_agents(venue, "pose/refined")))
 
+        keeps_refined = writer is not None or on_output is not None  # these take every refined pose
+
+        def want_refined() -> None:
+            hub.chairs.refined_wanted = keeps_refined or refined_heard.matching
+
         def heard(key: str) -> bool:
             if key.endswith(REFINED):
                 return refined_heard.matching
@@ -223,7 +228,7 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
                 continue
             if batch is None:
                 break
-            hub.chairs.refined_wanted = bool(writer or on_output or refined_heard.matching)
+            want_refined()
             if time.monotonic() >= next_clock_check:
                 ask_raw_clocks()
                 next_clock_check = time.monotonic() + CLOCK_CHECK_S
@@ -263,7 +268,7 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
                     next_flush = time.monotonic() + FLUSH_EVERY_S
         if state is not None:  # before the final flush: a hub restarted from it carries on the session
             _checkpoint(state, writer, output, hub_state.HubState(hub, dedup, output.name, recorded))
-        hub.chairs.refined_wanted = bool(writer or on_output or refined_heard.matching)
+        want_refined()
         for part in hub.chairs.flush_by_agent():  # one agent's refined track at a time, not the venue's at once
             emit(part)
         emit(hub.flush())  # the rest (pedestrians); the chairs' smoothers are empty now
