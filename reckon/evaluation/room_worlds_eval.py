@@ -1,8 +1,8 @@
 """`reckon eval --room-worlds A-B`: the camera-identity room in many simulated rooms, both methods scored in each.
 
 Each room world (sim_devices.room.worlds) is simulated with the same motion seed and scored by the
-identity evaluation (reckon/evaluation/identity_eval.py: ours live and refined, the ceiling, the
-paper's method); its log is deleted once scored. Worlds run in worker processes, one per core by
+identity evaluation (reckon/evaluation/identity_eval.py: ours live, refined and in hindsight, the
+ceiling, the paper's method); its log is deleted once scored. Worlds run in worker processes, one per core by
 default (reckon/evaluation/worlds_eval.py `in_workers`, as for chairs). The report: per method, the median, p10 and worst world's time correct, and in how many
 worlds ours live is above the paper's method.
 """
@@ -15,13 +15,13 @@ from typing import Any, Callable
 
 import numpy as np
 
-ROWS = (("reckon", "live"), ("reckon", "refined"), ("ceiling", ""), ("paper", ""))
+ROWS = (("reckon", "live"), ("reckon", "refined"), ("hindsight", ""), ("ceiling", ""), ("paper", ""))
 
 
 @dataclass(frozen=True)
 class RoomWorldResult:
     world: int
-    time_correct_pct: dict[str, float]  # "reckon live", "reckon refined", "ceiling", "paper"
+    time_correct_pct: dict[str, float]  # "reckon live", "reckon refined", "hindsight", "ceiling", "paper"
     figures: dict[str, float]  # the world's drawn figures (dotted keys)
 
 
@@ -85,14 +85,15 @@ def summarise(results: list[RoomWorldResult]) -> dict[str, Any]:
 
 def to_table(summary: dict[str, Any], command: str) -> str:
     lines = [f"camera identity over room worlds ({command}): time correct %",
-             f"{'method':8} {'track':8} {'worlds':>6} {'median':>7} {'p10':>6} {'worst':>6}"]
+             f"{'method':9} {'track':8} {'worlds':>6} {'median':>7} {'p10':>6} {'worst':>6}"]
     for row in summary["methods"]:
-        lines.append(f"{row['method']:8} {row['track'] or '-':8} {row['worlds']:6d} {row['median_pct']:7.1f} "
+        lines.append(f"{row['method']:9} {row['track'] or '-':8} {row['worlds']:6d} {row['median_pct']:7.1f} "
                      f"{row['p10_pct']:6.1f} {row['worst_pct']:6.1f}")
     above = summary["ours_live_above_paper"]
     lines.append(f"ours live above the paper's method in {above['above']} of {above['worlds']} worlds")
-    lines.append("per world (ours live / refined, paper): " + ", ".join(
+    lines.append("per world (ours live / refined / in hindsight, paper): " + ", ".join(
         f"{w['world']}: {w['time_correct_pct'].get('reckon live', float('nan')):.1f} / "
-        f"{w['time_correct_pct'].get('reckon refined', float('nan')):.1f}, {w['time_correct_pct'].get('paper', float('nan')):.1f}"
+        f"{w['time_correct_pct'].get('reckon refined', float('nan')):.1f} / "
+        f"{w['time_correct_pct'].get('hindsight', float('nan')):.1f}, {w['time_correct_pct'].get('paper', float('nan')):.1f}"
         for w in summary["worlds"]))
     return "\n".join(lines)

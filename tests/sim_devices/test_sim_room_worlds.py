@@ -60,7 +60,8 @@ def test_eval_over_room_worlds_reports_the_spread_and_each_world(capsys):
     report = json.loads(capsys.readouterr().out)
     assert [w["world"] for w in report["worlds"]] == [1, 2]
     methods = {(m["method"], m["track"]): m for m in report["methods"]}
-    assert set(methods) == {("reckon", "live"), ("reckon", "refined"), ("ceiling", None), ("paper", None)}
+    assert set(methods) == {("reckon", "live"), ("reckon", "refined"), ("hindsight", None), ("ceiling", None),
+                            ("paper", None)}
     live = [w["time_correct_pct"]["reckon live"] for w in report["worlds"]]
     assert methods[("reckon", "live")]["median_pct"] == pytest.approx(np.median(live), abs=0.01)
     assert methods[("reckon", "live")]["worst_pct"] == pytest.approx(min(live), abs=0.01)
