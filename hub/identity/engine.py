@@ -47,6 +47,7 @@ from hub.identity.cues import (BIN_NS, BIN_S, MOVING_MPS, TRACK_DELAY_BINS, TURN
 from hub.identity.gait import LAGS, PAD_BINS, WINDOW_BINS, GaitPhase
 from hub.identity.rules import TrackRules
 from hub.identity.settings import IdentityCounters, IdentitySettings
+from hub.identity.window import LiveWindow
 from protocol import messages
 from protocol.messages import CorrectionKind
 from protocol.session import AgentKind, Mount, Session
@@ -102,6 +103,8 @@ class IdentityEngine:
         self.counters = IdentityCounters()
         self.update_s: deque[float] = deque(maxlen=4096)  # wall time of the latest hops (reports, not control)
         self.delays_s: deque[float] = deque(maxlen=4096)  # ... and how far behind the camera each scored
+        self.walkers = [i for i in range(count) if self.is_pedestrian[i]]
+        self.windows: dict[str, LiveWindow] = {}  # camera -> its walkers' window (settings.window_s > 0)
         self.rules = TrackRules(settings, self.agents, self.is_chair, self.start_xy, self.tracks, self.lost,
                                 self.counters, pose_of)
 
@@ -193,6 +196,12 @@ class IdentityEngine:
         tracks = [self.tracks[k] for k in keys]
         count = end - first
         agent_cues = self._agent_windows(first, count)
+        window = self._window(camera)
+        if window is not None:
+            window.add(keys, np.stack([t.cues.speed(first, count) for t in tracks]), agent_cues["activity"], first)
+            if window.due(end):
+                window.solve(end)
+                self.counters.window_solves += 1
         costs = self._bin_costs(tracks, agent_cues, first, count, camera_sd_m)  # (T, A, bins), NaN = not comparable
         forget = np.stack([np.where(self.is_pedestrian, s.pedestrian_forget_per_s, s.forget_per_s),
                            np.full(len(self.agents), s.fast_forget_per_s)]) ** (count * BIN_S)
@@ -208,6 +217,8 @@ class IdentityEngine:
         self.counters.pair_bins += work
         self.counters.max_pair_bins = max(self.counters.max_pair_bins, work)
         evidence = np.array([self._evidence(t) for t in tracks])
+        if window is not None:
+            evidence = window.steer(keys, evidence, s.window_weight)
         out += self._assign(camera, keys, tracks, evidence, now_ns)
         out += self._fixes(camera, tracks, evidence, now_ns, camera_sd_m, end * BIN_NS)
         self._learn_speed(tracks, evidence, first, count)
@@ -219,6 +230,15 @@ class IdentityEngine:
             self.next_lag_bin[camera] = end + int(s.lag_every_s / BIN_S)
             self._search_lag(camera, tracks, end)
         return out
+
+    def _window(self, camera: str) -> LiveWindow | None:
+        s = self.settings
+        if s.window_s <= 0 or not 0 < len(self.walkers) <= s.window_max_walkers:
+            return None
+        window = self.windows.get(camera)
+        if window is None:
+            window = self.windows[camera] = LiveWindow(self.walkers, s.window_s, s.window_every_s, s.window_iterations)
+        return window
 
     def _evidence(self, track: Track) -> np.ndarray:
         """Per agent: the slow mean of its bins' costs on this track (after the prior) or, where recent bins
@@ -241,7 +261,7 @@ class IdentityEngine:
         yaw = np.where(chair[:, None], b["yaw_dr"], b["yaw"])
         with np.errstate(invalid="ignore"):
             moving = np.where(np.isfinite(speed), speed > MOVING_MPS, np.nan)
-        return {"speed": speed, "yaw": yaw, "moving": moving, "tilt": b["tilt"],
+        return {"speed": speed, "yaw": yaw, "moving": moving, "tilt": b["tilt"], "activity": b["activity"],
                 "vx": np.where(chair[:, None], b["vx_dr"], np.nan), "vy": np.where(chair[:, None], b["vy_dr"], np.nan)}
 
     def _bin_costs(self, tracks: list[Track], agent: dict[str, np.ndarray], first: int, count: int,

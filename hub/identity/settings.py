@@ -47,6 +47,16 @@ class IdentitySettings:
     seated_tilt_deg: float = 5.0  # ... except for an agent whose waist leans this far from walking upright (seated)
     # pedestrians, per bin: x (a right pair's correlation of head bob and waist - this pair's) (0: off)
     gait_weight: float = 4.0
+    # people on foot: every window_every_s, the last window_s of every track named at once, the line from
+    # activity to speed learnt anew each time in at most window_iterations rounds (hub/identity/window.py; 0: off);
+    # the engine's evidence leans window_weight towards that choice (chosen on room seeds 1-5: docs/identity.md)
+    window_s: float = 30.0
+    window_every_s: float = 1.0
+    window_iterations: int = 4
+    window_weight: float = 0.5
+    # ... for up to this many walkers: a solve takes ~10 ms at 10 walkers, ~50 at 20, ~0.5 s at 50 (this VM), all
+    # in one hop; beyond it the engine alone names tracks live (docs/identity.md)
+    window_max_walkers: int = 20
     speed_sd_mps: float = 0.35
     yaw_sd_dps: float = 25.0
     course_sd_deg: float = 15.0  # a moving track's direction against a chair's dead-reckoned one (0: off)
@@ -73,7 +83,9 @@ class IdentitySettings:
                   "position_sd_m": (1e-3, 100.0), "lag_prior_s": (-5.0, 5.0), "continue_height_m": (0.0, 10.0),
                   "stature_weight": (0.0, 100.0), "gait_weight": (0.0, 100.0), "seated_tilt_deg": (0.0, 90.0),
                   "course_sd_deg": (0.0, 180.0),
-                  "course_min_mps": (0.0, 10.0), "course_prior_bins": (0.0, 1e4), "course_forget_per_s": (0.01, 1.0)}
+                  "course_min_mps": (0.0, 10.0), "course_prior_bins": (0.0, 1e4), "course_forget_per_s": (0.01, 1.0),
+                  "window_s": (0.0, 600.0), "window_every_s": (0.1, 60.0), "window_iterations": (1, 20),
+                  "window_weight": (0.0, 100.0), "window_max_walkers": (0, 10_000)}
         for name, (low, high) in checks.items():
             value = getattr(self, name)
             if not low <= value <= high:
@@ -99,3 +111,4 @@ class IdentityCounters:
     frames: int = 0
     tracks: int = 0
     lag_bins: int = 0
+    window_solves: int = 0  # the walkers' windows named at once (hub/identity/window.py)

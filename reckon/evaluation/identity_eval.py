@@ -286,11 +286,11 @@ def _hindsight(data: SessionData, arrivals: list[tuple[int, Any]], walkers: list
         verticals = {a: (tracks.frame_ns, vertical_acceleration(t, acc, tracks.frame_ns)) for a, (t, acc) in people_imu.items()}
         result = identify_hindsight(tracks, verticals)
         assignment[camera] = result.assignment(tracks.frame_ns)
-        m = result.model
+        solution, m = result.solution, result.solution.model
         notes.append(f"{camera}, ours in hindsight: learnt without labels slope {m.slope_g_per_mps:.3f} g per m/s, "
-                     f"Ave {m.ave_abs_error_g:.3f} g, SD {m.sd_abs_error_g:.3f} g (r = {m.correlation:.2f}) after "
-                     f"{result.iterations} assignments{'' if result.converged else ' (not converged)'}; "
-                     f"LP relaxation gap {100 * result.relaxation_gap:.2f} %")
+                     f"Ave {m.ave_abs_error_g:.3f} g, SD {m.sd_abs_error_g:.3f} g (r = {m.correlation:.2f}), the likeliest "
+                     f"of the assignments at round {solution.iterations}{'' if solution.converged else ' (not converged)'}; "
+                     f"LP relaxation gap {100 * solution.relaxation_gap:.2f} %")
     row = _score("hindsight", data, walkers, assignment)
     camera, tracks = next(iter(sorted(data.cameras.items())))
     window = _tail(tracks, PAPER_WINDOW_S)

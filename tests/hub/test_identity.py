@@ -35,6 +35,19 @@ def holder_at(changes: list, agent: str, time_s: float) -> int:
     return held
 
 
+def test_the_walkers_window_solves_once_a_second_and_can_be_turned_off():
+    tracks = [(1, "a", 0, 30), (2, "b", 0, 30), (3, "c", 0, 30)]
+    engine, changes = run(CROSSING, tracks)
+    assert 27 <= engine.counters.window_solves <= 30 and set(engine.windows) == {"cam1"}
+    assert len(engine.windows["cam1"].tracks) == 3
+    assert {(who, holder_at(changes, who, 29.0)) for who in "abc"} == {("a", 1), ("b", 2), ("c", 3)}
+    off, same = run(CROSSING, tracks, settings=IdentitySettings(window_s=0.0))
+    assert off.counters.window_solves == 0 and not off.windows
+    assert {(who, holder_at(same, who, 29.0)) for who in "abc"} == {("a", 1), ("b", 2), ("c", 3)}
+    crowd, _ = run(CROSSING, tracks, settings=IdentitySettings(window_max_walkers=2))  # 3 walkers: beyond it
+    assert crowd.counters.window_solves == 0
+
+
 def test_identities_follow_a_switch_at_a_crossing_and_ignore_a_false_track():
     # a and b cross at about 6 s; the tracker swaps them there: a continues as track 5, b as 4;
     # a is lost 14-14.5 s and comes back as track 7; track 6 is nobody

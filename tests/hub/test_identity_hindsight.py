@@ -8,9 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hub.identity.hindsight import PRIOR, assign, identify_hindsight, refit
+from hub.identity.hindsight import PRIOR, Samples, assign, identify_hindsight, refit, solve
 from hub.identity.paper.features import PaperModel, vertical_acceleration
-from hub.identity.paper.fragments import split_fragments
 from protocol.session_log import read_session
 from reckon.evaluation import identity_eval
 from reckon.evaluation.reckon_run import log_inputs
@@ -71,14 +70,33 @@ def test_assignment_shares_nothing_and_takes_no_loss():
 
 
 def test_refit_keeps_the_previous_line_when_the_assignment_says_nothing():
-    times = np.arange(0, 100) * 50_000_000
-    tracks = type("T", (), {"frame_ns": times, "time_ns": times, "track_id": np.ones(100, dtype=np.int64),
-                            "x_m": np.zeros(100), "y_m": np.zeros(100)})()
-    fragments = split_fragments(tracks, 1.0)
-    verticals = np.full((1, 100), 0.05)
+    time = np.arange(100)
+    samples = Samples(np.zeros(100, dtype=np.int64), time, np.zeros(100), np.full((1, 100), 0.05), np.array([0]),
+                      np.array([99]), 0.05)
     previous = PaperModel(0.1, 0.01, 0.02, 0.02)
-    assert refit([], fragments, verticals, previous) is previous
-    assert refit([(0, 0)], fragments, verticals, previous) is previous  # a still track: no speed spread
+    assert refit([], samples, previous) is previous
+    assert refit([(0, 0)], samples, previous) is previous  # a still track: no speed spread
+    short = Samples(samples.label[:40], time[:40], np.linspace(0, 1.5, 40), samples.measured_g[:, :40],
+                    np.array([0]), np.array([39]), 0.05)
+    assert refit([(0, 0)], short, previous) is previous  # 2 s of pairs: too few to learn a line from
+
+
+def test_the_refit_line_does_not_flatten_with_wrong_pairs():
+    """Half the pairs taken wrong (a wearer's activity against someone else's speed): least squares would halve
+    the slope; the reduced major axis keeps it, and it is never flatter than walking allows."""
+    rng = np.random.default_rng(3)
+    speed = rng.uniform(0.0, 1.6, 4000)
+    right = 0.12 * speed + 0.01 + rng.normal(0, 0.01, 4000)
+    wrong = 0.12 * rng.permutation(speed) + 0.01 + rng.normal(0, 0.01, 4000)
+    label = np.repeat([0, 1], 2000)
+    samples = Samples(label, np.arange(4000), speed, np.vstack([np.r_[right[:2000], wrong[2000:]]]),
+                      np.array([0, 2000]), np.array([1999, 3999]), 0.05)
+    line = refit([(0, 0), (0, 1)], samples, PRIOR)
+    assert line.slope_g_per_mps == pytest.approx(0.12, rel=0.05)
+    assert np.polyfit(speed, samples.measured_g[0], 1)[0] < 0.09  # what least squares would have taken
+    flat = Samples(label, np.arange(4000), speed, np.full((1, 4000), 0.02) + rng.normal(0, 0.002, (1, 4000)),
+                   samples.start, samples.end, 0.05)
+    assert refit([(0, 0), (0, 1)], flat, PRIOR).slope_g_per_mps == pytest.approx(0.06)
 
 
 def _crossing(tmp_path: Path):
@@ -96,11 +114,12 @@ def test_names_every_fragment_without_labels(tmp_path: Path, slope: float):
     data, tracks, people = _crossing(tmp_path)
     prior = PaperModel(slope, PRIOR.intercept_g, PRIOR.ave_abs_error_g, PRIOR.sd_abs_error_g)
     result = identify_hindsight(tracks, people, prior)
-    held = {(result.people[p], int(result.fragments.track_id[k])) for p, k in result.chosen}
+    solution = result.solution
+    held = {(result.people[p], int(result.fragments.track_id[k])) for p, k in solution.chosen}
     truth = {(person, track) for track, person, _, _ in TRACKS if person}
     assert held == truth  # the swap at 6 s, both of a's breaks, and the bystander's track left alone
-    assert result.converged and result.model.slope_g_per_mps > 0
-    assert result.relaxation_gap == pytest.approx(0.0, abs=1e-6)
+    assert solution.converged and solution.model.slope_g_per_mps > 0 and solution.likelihood_ratio > 0
+    assert solution.relaxation_gap == pytest.approx(0.0, abs=1e-6)
     assignment = result.assignment(tracks.frame_ns)
     at = lambda s: int(np.searchsorted(tracks.frame_ns, tracks.frame_ns[0] + int(s * 1e9)))
     assert assignment["a"][at(3)] == 1 and assignment["a"][at(8)] == 5 and assignment["a"][at(20)] == 7
