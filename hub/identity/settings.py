@@ -54,8 +54,8 @@ class IdentitySettings:
     window_every_s: float = 1.0
     window_iterations: int = 4
     window_weight: float = 0.5
-    # ... for up to this many walkers: a solve takes ~10 ms at 10 walkers, ~50 at 20, ~0.5 s at 50 (this VM), all
-    # in one hop; beyond it the engine alone names tracks live (docs/identity.md)
+    # ... for up to this many walkers: the hop that solves takes 10-50 ms at 10 walkers, 30-120 at 20, ~0.5 s at
+    # 50 (this VM); beyond it the engine alone names tracks live (docs/identity.md)
     window_max_walkers: int = 20
     speed_sd_mps: float = 0.35
     yaw_sd_dps: float = 25.0
