@@ -57,6 +57,9 @@ MIN_SLOPE_G_PER_MPS = 0.06
 MIN_FIT_S = 2.5  # a refit on fewer assigned seconds keeps the previous line
 TIME_LIMIT_S = 10.0  # per branch and bound; HiGHS returns its best assignment so far when it is reached
 INTEGRAL_TOLERANCE = 1e-6  # an LP optimum this close to 0 / 1 everywhere is an assignment
+# A second of the live engine's identity on a fragment counts as a second of fit 0.03 g better than a lost
+# stretch (chosen on the paper's room seeds 1-5 and 6 / 10 wearers seeds 1-5 from 0.003-0.3: docs/identity.md)
+HELD_WEIGHT_G = 0.03
 
 
 @dataclass(frozen=True)
@@ -207,14 +210,18 @@ def refit(chosen: list[tuple[int, int]], samples: Samples, previous: PaperModel)
 
 
 def solve(samples: Samples, prior: PaperModel = PRIOR, max_iterations: int = MAX_ITERATIONS,
-          overlap_tolerance: int = OVERLAP_TOLERANCE_FRAMES, candidates: int | None = None) -> Solution:
-    """Assign, refit, repeat from `prior`; the likeliest of the assignments made (see the module's docstring)."""
+          overlap_tolerance: int = OVERLAP_TOLERANCE_FRAMES, candidates: int | None = None,
+          bonus: np.ndarray | None = None) -> Solution:
+    """Assign, refit, repeat from `prior`; the likeliest of the assignments made (see the module's docstring).
+    `bonus` (people, fragments) is added to every round's gains: evidence from elsewhere, in the gains' units."""
     if max_iterations < 1:
         raise ValueError(f"max_iterations {max_iterations} must be >= 1")
     model, previous = prior, None
     best: Solution | None = None
     for iteration in range(1, max_iterations + 1):
         gain, likelihood, _ = gains(model, samples)
+        if bonus is not None:
+            gain = gain + bonus
         taken, total, gap = assign(gain, samples.start, samples.end, overlap_tolerance, candidates)
         score = float(sum(likelihood[p, k] for p, k in taken))
         converged = previous is not None and set(taken) == set(previous)
@@ -229,16 +236,31 @@ def solve(samples: Samples, prior: PaperModel = PRIOR, max_iterations: int = MAX
 
 
 def identify_hindsight(tracks: TrackArrays, people: Mapping[str, tuple[np.ndarray, np.ndarray]],
-                       prior: PaperModel = PRIOR, max_iterations: int = MAX_ITERATIONS) -> HindsightResult:
+                       prior: PaperModel = PRIOR, max_iterations: int = MAX_ITERATIONS,
+                       held: Mapping[str, np.ndarray] | None = None,
+                       held_weight_g: float = HELD_WEIGHT_G) -> HindsightResult:
     """Assign every fragment of `tracks` at once, the regression learnt on the way.
 
     people: name -> (time_ns, vertical acceleration in g), as for the paper's `identify`
-    (`vertical_acceleration` of each wearer's waist on the venue clock)."""
+    (`vertical_acceleration` of each wearer's waist on the venue clock). held (optional): name -> the
+    track id the live engine gave that person at each of `tracks.frame_ns` (0: none); each second of it
+    on a fragment adds `held_weight_g` x 1 s to that pair's gain (the engine's other cues, the head's
+    bob, a stature learnt over minutes, speak there)."""
     fragments = split_fragments(tracks, prior.window_s)
     frames = np.asarray(tracks.frame_ns, dtype=np.int64)
     names = tuple(sorted(people))
     verticals = np.array([on_frame_grid(frames, n, *people[n]) for n in names]).reshape(len(names), len(frames))
     label = np.repeat(np.arange(len(fragments.track_id)), np.diff(fragments.offsets))
+    frame_s = frame_period_s(frames) if len(frames) > 1 else 0.05
     samples = Samples(label, fragments.frame_index, fragments.speed_mps, verticals[:, fragments.frame_index],
-                      fragments.start_frame, fragments.end_frame, frame_period_s(frames) if len(frames) > 1 else 0.05)
-    return HindsightResult(names, fragments, solve(samples, prior, max_iterations))
+                      fragments.start_frame, fragments.end_frame, frame_s)
+    bonus = None
+    if held is not None:
+        bonus = np.zeros((len(names), len(fragments.track_id)))
+        track_of_entry = fragments.track_id[label]
+        for p, name in enumerate(names):
+            ids = held.get(name)
+            if ids is not None:
+                on = np.asarray(ids)[fragments.frame_index] == track_of_entry
+                bonus[p] = held_weight_g * frame_s * np.bincount(label, weights=on, minlength=len(fragments.track_id))
+    return HindsightResult(names, fragments, solve(samples, prior, max_iterations, bonus=bonus))

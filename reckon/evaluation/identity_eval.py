@@ -81,7 +81,7 @@ def evaluate_identity(data: SessionData, path: Path, progress: Callable[[str], N
     agents = [a.id for a in data.session.agents if _body_sensor(a) is not None]
     arrivals = arrivals if arrivals is not None else log_inputs(path)
     progress("identity: ours (the hub's engine over the log)")
-    rows, delay_s = _ours(data, arrivals, agents)
+    rows, delay_s, live = _ours(data, arrivals, agents)
     report.rows += rows
     report.rows.append(_ceiling(data, agents, delay_s))
     progress("identity: the paper's permutations")
@@ -89,7 +89,7 @@ def evaluate_identity(data: SessionData, path: Path, progress: Callable[[str], N
     walkers = [a for a in agents if data.session.agent(a).kind is AgentKind.PEDESTRIAN]
     if walkers:
         progress("identity: ours in hindsight")
-        report.rows.append(_hindsight(data, arrivals, walkers, report.notes))
+        report.rows.append(_hindsight(data, arrivals, walkers, report.notes, live))
     return report
 
 
@@ -100,8 +100,10 @@ def _body_sensor(agent: Any) -> Any:
 # -- ours ---------------------------------------------------------------------------------------
 
 
-def _ours(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]) -> tuple[list[IdentityRow], float]:
-    """(live, refined) rows, and the median delay at which the engine scored the camera's bins."""
+def _ours(data: SessionData, arrivals: list[tuple[int, Any]],
+          agents: list[str]) -> tuple[list[IdentityRow], float, dict[str, dict[str, np.ndarray]]]:
+    """(live, refined) rows, the median delay at which the engine scored the camera's bins, and the live
+    identities (camera -> agent -> track id at each frame)."""
     identities: list[Any] = []
     hub, _, _ = run_lockstep(data.session, arrivals, HubSettings(corrections=frozenset({"camera"})), identities)
     held: dict[str, list[tuple[int, str, int]]] = {a: [] for a in agents}
@@ -123,7 +125,8 @@ def _ours(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str])
     hindsight.update_ms_p99 = live.update_ms_p99
     hindsight.note = "refined: a track's identity also holds back to where the track began (offline, like the paper)"
     delays = hub.identity.delays_s if hub.identity is not None else ()
-    return [live, hindsight], float(np.median(delays)) if len(delays) else IdentitySettings().delay_s
+    return ([live, hindsight], float(np.median(delays)) if len(delays) else IdentitySettings().delay_s,
+            assignment)
 
 
 def _back_filled(held: dict[str, np.ndarray], tracks: CameraTracks) -> dict[str, np.ndarray]:
@@ -278,13 +281,15 @@ def _paper(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]
     return row
 
 
-def _hindsight(data: SessionData, arrivals: list[tuple[int, Any]], walkers: list[str], notes: list[str]) -> IdentityRow:
-    """Ours offline: every fragment of each camera at once, the regression learnt from the session (no labels)."""
+def _hindsight(data: SessionData, arrivals: list[tuple[int, Any]], walkers: list[str], notes: list[str],
+               live: dict[str, dict[str, np.ndarray]]) -> IdentityRow:
+    """Ours offline: every fragment of each camera at once, the regression learnt from the session (no labels),
+    the live engine's identities as evidence too."""
     people_imu = _people(data, arrivals, walkers)
     assignment: dict[str, dict[str, np.ndarray]] = {}
     for camera, tracks in data.cameras.items():
         verticals = {a: (tracks.frame_ns, vertical_acceleration(t, acc, tracks.frame_ns)) for a, (t, acc) in people_imu.items()}
-        result = identify_hindsight(tracks, verticals)
+        result = identify_hindsight(tracks, verticals, held=live.get(camera))
         assignment[camera] = result.assignment(tracks.frame_ns)
         solution, m = result.solution, result.solution.model
         notes.append(f"{camera}, ours in hindsight: learnt without labels slope {m.slope_g_per_mps:.3f} g per m/s, "
@@ -298,8 +303,8 @@ def _hindsight(data: SessionData, arrivals: list[tuple[int, Any]], walkers: list
     identify_hindsight(window, {a: (window.frame_ns, vertical_acceleration(t, acc, window.frame_ns))
                                 for a, (t, acc) in people_imu.items()})
     row.update_ms_p99 = (time.perf_counter() - started) * 1e3
-    row.note = (f"every fragment at once, regression learnt without labels (offline, like the paper); "
-                f"update: one run over the last {PAPER_WINDOW_S:.0f} s")
+    row.note = (f"every fragment at once, regression learnt without labels, the live identities as evidence "
+                f"(offline, like the paper); update: one run over the last {PAPER_WINDOW_S:.0f} s")
     return row
 
 

@@ -131,3 +131,20 @@ def test_a_bad_iteration_count_is_refused(tmp_path: Path):
     _, tracks, people = _crossing(tmp_path)
     with pytest.raises(ValueError, match="max_iterations 0"):
         identify_hindsight(tracks, people, max_iterations=0)
+
+
+def test_the_live_identities_count_as_evidence(tmp_path: Path):
+    """A live engine that held a on b's track and b on a's from 6 s (a swap it missed) pulls the choice its way
+    as far as its weight goes: lightly, the motion still wins; heavily, the held pairs are taken."""
+    _, tracks, people = _crossing(tmp_path)
+    wrong = {"a": np.where(tracks.frame_ns >= tracks.frame_ns[0] + 6 * 10**9, 4, 1),
+             "b": np.where(tracks.frame_ns >= tracks.frame_ns[0] + 6 * 10**9, 5, 2),
+             "c": np.full(len(tracks.frame_ns), 3)}
+    truth = {(person, track) for track, person, _, _ in TRACKS if person}
+
+    def held_pairs(weight: float) -> set[tuple[str, int]]:
+        result = identify_hindsight(tracks, people, held=wrong, held_weight_g=weight)
+        return {(result.people[p], int(result.fragments.track_id[k])) for p, k in result.solution.chosen}
+
+    assert held_pairs(0.0) == truth and held_pairs(0.001) == truth
+    assert {("a", 4), ("b", 5)} <= held_pairs(10.0)
