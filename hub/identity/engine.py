@@ -196,13 +196,14 @@ class IdentityEngine:
         tracks = [self.tracks[k] for k in keys]
         count = end - first
         agent_cues = self._agent_windows(first, count)
+        track_cues = track_hop_cues([t.cues for t in tracks], first, count)
         window = self._window(camera)
         if window is not None:
-            window.add(keys, np.stack([t.cues.speed(first, count) for t in tracks]), agent_cues["activity"], first)
+            window.add(keys, track_cues["speed"], agent_cues["activity"], first)
             if window.due(end):
                 window.solve(end)
                 self.counters.window_solves += 1
-        costs = self._bin_costs(tracks, agent_cues, first, count, camera_sd_m)  # (T, A, bins), NaN = not comparable
+        costs = self._bin_costs(tracks, track_cues, agent_cues, first, count, camera_sd_m)  # (T, A, bins), NaN = not comparable
         forget = np.stack([np.where(self.is_pedestrian, s.pedestrian_forget_per_s, s.forget_per_s),
                            np.full(len(self.agents), s.fast_forget_per_s)]) ** (count * BIN_S)
         bins = np.arange(first, end)
@@ -264,10 +265,9 @@ class IdentityEngine:
         return {"speed": speed, "yaw": yaw, "moving": moving, "tilt": b["tilt"], "activity": b["activity"],
                 "vx": np.where(chair[:, None], b["vx_dr"], np.nan), "vy": np.where(chair[:, None], b["vy_dr"], np.nan)}
 
-    def _bin_costs(self, tracks: list[Track], agent: dict[str, np.ndarray], first: int, count: int,
-                   camera_sd_m: float) -> np.ndarray:
+    def _bin_costs(self, tracks: list[Track], cues: dict[str, np.ndarray], agent: dict[str, np.ndarray], first: int,
+                   count: int, camera_sd_m: float) -> np.ndarray:
         s = self.settings
-        cues = track_hop_cues([t.cues for t in tracks], first, count)
         t_speed, t_yaw, t_x, t_y = cues["speed"], cues["yaw"], cues["x"], cues["y"]
         with np.errstate(invalid="ignore"):
             t_moving = np.where(np.isfinite(t_speed), t_speed > MOVING_MPS, np.nan)

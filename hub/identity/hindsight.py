@@ -35,7 +35,7 @@ Pure numpy / scipy, no I/O. Bad input raises ValueError naming the value (from t
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping
 
 import numpy as np
@@ -64,10 +64,9 @@ HELD_WEIGHT_G = 0.03
 
 @dataclass(frozen=True)
 class Samples:
-    """A stretch's evidence: entry n is fragment label[n] at time index time[n] (a frame or a bin)."""
+    """A stretch's evidence, one entry per (fragment, moment); times are frame or bin numbers."""
 
     label: np.ndarray  # (N,) fragment index
-    time: np.ndarray  # (N,) int, the frame or bin number
     speed_mps: np.ndarray  # (N,) the fragment's speed there; NaN unknown
     measured_g: np.ndarray  # (P, N) each wearer's vertical acceleration then; NaN unknown
     start: np.ndarray  # (K,) each fragment's first time index
@@ -107,10 +106,9 @@ class HindsightResult:
         return out
 
 
-def gains(model: PaperModel, samples: Samples) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(people, fragments) three times, 0 where they share no sample: the gain L x (Ave + SD - Mae) the
-    assignment maximises, the log-likelihood ratio (per second of the pair) that scores a whole assignment,
-    and L, the seconds they share."""
+def gains(model: PaperModel, samples: Samples) -> tuple[np.ndarray, np.ndarray]:
+    """(people, fragments) twice, 0 where they share no sample: the gain L x (Ave + SD - Mae) the assignment
+    maximises, and the log-likelihood ratio (per second of the pair) that scores a whole assignment."""
     people, count = len(samples.measured_g), len(samples.start)
     error = np.abs(samples.measured_g - model.predict(samples.speed_mps)[None, :])
     valid = np.isfinite(error)
@@ -129,7 +127,7 @@ def gains(model: PaperModel, samples: Samples) -> tuple[np.ndarray, np.ndarray, 
     right = max(model.ave_abs_error_g, 1e-6)
     background = float(sums.sum() / shared.sum()) if known.any() else right
     per_s = np.log(background / right) - mae * (1.0 / right - 1.0 / background)
-    return gain, np.where(known, seconds * per_s, 0.0), seconds
+    return gain, np.where(known, seconds * per_s, 0.0)
 
 
 def assign(gain: np.ndarray, start_frame: np.ndarray, end_frame: np.ndarray,
@@ -219,7 +217,7 @@ def solve(samples: Samples, prior: PaperModel = PRIOR, max_iterations: int = MAX
     model, previous = prior, None
     best: Solution | None = None
     for iteration in range(1, max_iterations + 1):
-        gain, likelihood, _ = gains(model, samples)
+        gain, likelihood = gains(model, samples)
         if bonus is not None:
             gain = gain + bonus
         taken, total, gap = assign(gain, samples.start, samples.end, overlap_tolerance, candidates)
@@ -228,8 +226,7 @@ def solve(samples: Samples, prior: PaperModel = PRIOR, max_iterations: int = MAX
         if best is None or score > best.likelihood_ratio:
             best = Solution(tuple(taken), model, iteration, converged, total, gap, score)
         if converged:
-            return Solution(best.chosen, best.model, best.iterations, True, best.total_gain, best.relaxation_gap,
-                            best.likelihood_ratio)
+            return replace(best, converged=True)
         previous = taken
         model = refit(taken, samples, model)
     return best
@@ -252,8 +249,8 @@ def identify_hindsight(tracks: TrackArrays, people: Mapping[str, tuple[np.ndarra
     verticals = np.array([on_frame_grid(frames, n, *people[n]) for n in names]).reshape(len(names), len(frames))
     label = np.repeat(np.arange(len(fragments.track_id)), np.diff(fragments.offsets))
     frame_s = frame_period_s(frames) if len(frames) > 1 else 0.05
-    samples = Samples(label, fragments.frame_index, fragments.speed_mps, verticals[:, fragments.frame_index],
-                      fragments.start_frame, fragments.end_frame, frame_s)
+    samples = Samples(label, fragments.speed_mps, verticals[:, fragments.frame_index], fragments.start_frame,
+                      fragments.end_frame, frame_s)
     bonus = None
     if held is not None:
         bonus = np.zeros((len(names), len(fragments.track_id)))

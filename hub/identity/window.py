@@ -101,8 +101,8 @@ class LiveWindow:
         time = np.concatenate(times)
         slots = time % self.capacity
         measured = np.where((self.activity_bins[slots] == time)[None, :], self.activity[:, slots], np.nan)
-        samples = Samples(np.concatenate(labels), time, np.concatenate(speeds), measured, np.array(starts),
-                          np.array(ends), BIN_S)
+        samples = Samples(np.concatenate(labels), np.concatenate(speeds), measured, np.array(starts), np.array(ends),
+                          BIN_S)
         solution = solve(samples, PRIOR, self.max_iterations, overlap_tolerance=1, candidates=CANDIDATES)
         label, speed = samples.label, samples.speed_mps
         with np.errstate(invalid="ignore"):

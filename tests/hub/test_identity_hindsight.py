@@ -70,13 +70,12 @@ def test_assignment_shares_nothing_and_takes_no_loss():
 
 
 def test_refit_keeps_the_previous_line_when_the_assignment_says_nothing():
-    time = np.arange(100)
-    samples = Samples(np.zeros(100, dtype=np.int64), time, np.zeros(100), np.full((1, 100), 0.05), np.array([0]),
+    samples = Samples(np.zeros(100, dtype=np.int64), np.zeros(100), np.full((1, 100), 0.05), np.array([0]),
                       np.array([99]), 0.05)
     previous = PaperModel(0.1, 0.01, 0.02, 0.02)
     assert refit([], samples, previous) is previous
     assert refit([(0, 0)], samples, previous) is previous  # a still track: no speed spread
-    short = Samples(samples.label[:40], time[:40], np.linspace(0, 1.5, 40), samples.measured_g[:, :40],
+    short = Samples(samples.label[:40], np.linspace(0, 1.5, 40), samples.measured_g[:, :40],
                     np.array([0]), np.array([39]), 0.05)
     assert refit([(0, 0)], short, previous) is previous  # 2 s of pairs: too few to learn a line from
 
@@ -89,12 +88,12 @@ def test_the_refit_line_does_not_flatten_with_wrong_pairs():
     right = 0.12 * speed + 0.01 + rng.normal(0, 0.01, 4000)
     wrong = 0.12 * rng.permutation(speed) + 0.01 + rng.normal(0, 0.01, 4000)
     label = np.repeat([0, 1], 2000)
-    samples = Samples(label, np.arange(4000), speed, np.vstack([np.r_[right[:2000], wrong[2000:]]]),
+    samples = Samples(label, speed, np.vstack([np.r_[right[:2000], wrong[2000:]]]),
                       np.array([0, 2000]), np.array([1999, 3999]), 0.05)
     line = refit([(0, 0), (0, 1)], samples, PRIOR)
     assert line.slope_g_per_mps == pytest.approx(0.12, rel=0.05)
     assert np.polyfit(speed, samples.measured_g[0], 1)[0] < 0.09  # what least squares would have taken
-    flat = Samples(label, np.arange(4000), speed, np.full((1, 4000), 0.02) + rng.normal(0, 0.002, (1, 4000)),
+    flat = Samples(label, speed, np.full((1, 4000), 0.02) + rng.normal(0, 0.002, (1, 4000)),
                    samples.start, samples.end, 0.05)
     assert refit([(0, 0), (0, 1)], flat, PRIOR).slope_g_per_mps == pytest.approx(0.06)
 
