@@ -118,8 +118,11 @@ class Deduplicator:
 
     def _check_timed(self, stream: tuple[str, ...], time_ns: int) -> Verdict:
         newest = self._timed.get(stream)
-        if newest is None or time_ns > newest:
+        if newest is None:
             self._remember(self._timed, stream, time_ns)
+            return Verdict.NEW
+        if time_ns > newest:  # most inputs: a known stream moving on
+            self._timed[stream] = time_ns
             return Verdict.NEW
         if time_ns == newest:
             return Verdict.DUPLICATE

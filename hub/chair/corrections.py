@@ -122,6 +122,7 @@ class BeaconLevels:
     def __init__(self, beacons: tuple[Beacon, ...]) -> None:
         self.beacons = {beacon.id: beacon for beacon in beacons}
         self.levels = {beacon.id: BeaconLevel() for beacon in beacons}
+        self._floors: dict[str, float] = {}  # pass_floor_dbm's, until the beacon's peaks change (read per sighting)
 
     def level_dbm(self, beacon_id: str) -> float:
         record = self.levels[beacon_id]
@@ -131,13 +132,17 @@ class BeaconLevels:
 
     def pass_floor_dbm(self, beacon_id: str) -> float:
         """Sightings weaker than this are not part of a pass."""
-        return min(PASS_FLOOR_DBM, self.level_dbm(beacon_id) - PASS_DB)
+        floor = self._floors.get(beacon_id)
+        if floor is None:
+            floor = self._floors[beacon_id] = min(PASS_FLOOR_DBM, self.level_dbm(beacon_id) - PASS_DB)
+        return floor
 
     def close(self, beacon_id: str, peak_dbm: float) -> np.ndarray | None:
         """A pass ended at this peak: the covariance of its fix, were it close, if it is a candidate; else
         None. (The peak joins the beacon's record.)"""
         beacon, level = self.beacons[beacon_id], self.level_dbm(beacon_id)
         self.levels[beacon_id].peaks.append(peak_dbm)
+        self._floors.pop(beacon_id, None)
         slant = 10.0 ** ((beacon.tx_power_dbm - peak_dbm) / (10.0 * PATH_LOSS_EXPONENT))
         horizontal = math.sqrt(max(slant * slant - (beacon.height_m - RECEIVER_HEIGHT_M) ** 2, 0.0))
         if horizontal > BEACON_MAX_HORIZONTAL_M and peak_dbm < level - ACCEPT_DB:

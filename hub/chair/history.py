@@ -9,10 +9,12 @@ moved; a look-up takes the last pose not after the time, searching from the newe
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Sequence
 
 import numpy as np
 
+_ROW = struct.Struct("7d")  # a row written straight into `rows`' memory: half a numpy row assignment's time
 SCAN = 8  # poses looked at one by one from the newest before a vectorised search (most look-ups are recent)
 
 
@@ -39,7 +41,8 @@ class PoseHistory:
         elif self.end - self.start == self.capacity:
             self.start += 1
         self.time_ns[self.end] = time_ns
-        self.rows[self.end] = (x, y, covariance[0], covariance[1], covariance[3], covariance[4], heading_rad)
+        _ROW.pack_into(self.rows, self.end * _ROW.size, x, y, covariance[0], covariance[1], covariance[3], covariance[4],
+                       heading_rad)
         self.end += 1
 
     def clear(self) -> None:

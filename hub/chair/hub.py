@@ -67,7 +67,6 @@ from protocol.session import AgentKind, Mount, Session
 Kind = messages.CorrectionKind
 FIX_GATE_CHI2 = 13.8  # 99.9 %, 2 dof
 ACROSS_VARIANCE_M2 = 1e4  # a contact says nothing about the direction across the line between chairs
-_EYE2 = np.eye(2)  # read only
 PUSH_GATE_COS = math.cos(math.radians(60.0))  # both headings' errors, and pushes off the line between centres
 PUSH_LINE_SD = math.radians(20.0)  # spread of the pushes' line about the centres' (both headings, glancing contacts)
 _EstimatedPose = messages.EstimatedPose
@@ -155,6 +154,9 @@ class ChairHub:
         # learns): when nobody does, its poses still pass through the smoothers, never into messages.
         self.refined_wanted = True
         self._pass_end_ns = settings.pass_end_s * 1e9
+        self._window_ns = int(settings.pairing_window_s * 1e9)  # an impact group's span
+        self._hold_ns = self._window_ns + settings.lateness_s * 1e9  # ... and how long it waits after its first
+        self._stale_ns = settings.stale_s * 1e9
 
     # -- inputs ------------------------------------------------------------------------------
 
@@ -212,12 +214,12 @@ class ChairHub:
         values = pose.covariance[:]  # the 3 x 3 as floats (a slice of the repeated field: a list)
         if len(values) != 9:
             values = _IDENTITY
-        view.covariance = np.array(values, dtype=float).reshape(3, 3)
+        view.edge_covariance = values
         self._grow_extra(view, time_ns, edge_x, edge_y, sequence)
         if view.latest_ns is None or time_ns > view.latest_ns:
             view.latest_ns = time_ns
         honest = list(values)  # + extra on the position block, in floats: one small array op less
-        e00, e01, e10, e11 = view.extra.ravel().tolist()
+        e00, e01, e10, e11 = view.extra_m2
         honest[0] += e00
         honest[1] += e01
         honest[3] += e10
@@ -225,7 +227,7 @@ class ChairHub:
         view.history.append(time_ns, x, y, values, heading)
         view.poses += 1
         out = [self._pose_message(view, time_ns, x, y, heading, honest, messages.Track.LIVE)]
-        refined = view.smoother.add(time_ns, x, y, heading, values)
+        refined = view.smoother.add(time_ns, x, y, heading, values, self.refined_wanted)
         if refined:
             out += self._refined(view, refined)
         if view.passes or view.ended or view.fixes:
@@ -246,9 +248,12 @@ class ChairHub:
             return
         travel = math.hypot(x - last[1], y - last[2]) if sequence == last[3] else 0.0
         grow = self.settings.extra_m2_per_m * travel + self.settings.extra_m2_per_s * (time_ns - last[0]) * 1e-9
-        extra = view.extra  # grown in place: every other change to it makes a new array
-        if grow > 0 and extra[0, 0] + extra[1, 1] < 2 * self.settings.extra_max_m2:
-            extra += grow * _EYE2
+        extra = view.extra_m2  # grown in place (as extra + grow x identity: + 0.0 off the diagonal)
+        if grow > 0 and extra[0] + extra[3] < 2 * self.settings.extra_max_m2:
+            extra[0] += grow
+            extra[1] += 0.0
+            extra[2] += 0.0
+            extra[3] += grow
 
     def on_impact(self, event: Any) -> None:
         if event.peak_g < self.settings.impact_g or "collision" not in self.settings.corrections:
@@ -276,6 +281,7 @@ class ChairHub:
             current = None
         if current is None:
             view.passes[sighting.beacon_id] = Pass(sighting.rssi_dbm, time_ns, time_ns)
+            view.passes_last_ns = min(view.passes_last_ns, time_ns)
         else:
             current.last_ns = max(current.last_ns, time_ns)
             if sighting.rssi_dbm > current.peak_rssi:
@@ -320,11 +326,12 @@ class ChairHub:
         """
         if view.latest_ns is None:
             return []
-        if view.passes:
-            latest_ns, end_ns = view.latest_ns, self._pass_end_ns
+        latest_ns, end_ns = view.latest_ns, self._pass_end_ns
+        if view.passes and latest_ns - view.passes_last_ns > end_ns:  # one may have ended (sightings move last_ns on)
             for beacon_id, current in list(view.passes.items()):
                 if latest_ns - current.last_ns > end_ns:
                     view.ended.append((beacon_id, view.passes.pop(beacon_id)))
+            view.passes_last_ns = min((current.last_ns for current in view.passes.values()), default=latest_ns)
         out = []
         while view.ended and view.ended[0][1].peak_ns <= view.latest_ns:
             beacon_id, ended = view.ended.popleft()
@@ -387,8 +394,7 @@ class ChairHub:
         """Pair the impact groups every live agent's poses have passed (called with every pose)."""
         if not self.impacts:
             return []
-        window_ns = int(self.settings.pairing_window_s * 1e9)
-        hold_ns = window_ns + self.settings.lateness_s * 1e9
+        window_ns, hold_ns = self._window_ns, self._hold_ns
         if self._live_agent_short(posed, hold_ns):
             return []  # the usual case: nothing to close yet
         watermark = self._watermark()
@@ -423,7 +429,7 @@ class ChairHub:
             self._short[posed.agent_id] = None  # also an agent whose first pose this is
         else:
             self._short.pop(posed.agent_id, None)
-        stale_ns = self.settings.stale_s * 1e9
+        stale_ns = self._stale_ns
         for agent_id in self._short:  # usually the first is live
             if self.newest_arrival_ns - self.agents[agent_id].arrival_ns <= stale_ns:
                 return True
@@ -501,7 +507,8 @@ class ChairHub:
         of that update (Joseph form, prior P + extra) holds beyond the edge's. Sending a smaller
         measurement covariance instead, so that the edge would apply the honest gain, also scales the
         edge's heading update and diverges (a 120 s game without camera: 9.6 m against 0.70 m)."""
-        prior = view.covariance[:2, :2]
+        edge_covariance = np.array(view.edge_covariance, dtype=float).reshape(3, 3)
+        prior = edge_covariance[:2, :2]
         honest = prior + view.extra
         gain = prior @ np.linalg.inv(prior + covariance)
         expected = gain @ measured
@@ -511,8 +518,8 @@ class ChairHub:
         after = keep @ prior
         honest_after = keep @ honest @ keep.T + gain @ covariance @ gain.T
         view.extra = _psd(honest_after - after)
-        view.covariance = view.covariance.copy()
-        view.covariance[:2, :2] = after
+        edge_covariance[:2, :2] = after
+        view.edge_covariance = edge_covariance.ravel().tolist()
         view.smoother.correct(time_ns, expected, 0.5 * float(after[0, 0] + after[1, 1]))
         view.applied[{Kind.VIDEO: "camera", Kind.MANUAL: "fix"}.get(kind, kind.name.lower())] += 1
         return messages.new("Correction", timestamp_ns=int(time_ns), agent_id=view.agent_id, kind=kind,

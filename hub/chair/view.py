@@ -34,22 +34,37 @@ class AgentView:
     history: PoseHistory = field(default_factory=lambda: PoseHistory(HISTORY))  # live poses
     latest_ns: int | None = None  # venue time of the newest pose
     arrival_ns: int = 0  # hub clock when its last message came
-    covariance: np.ndarray = field(default_factory=lambda: np.eye(3))
+    # The newest edge pose's 3 x 3 covariance, row-major, as the message held it: a correction reads
+    # it (as an array), every pose replaces it (a list: an array made per pose cost a microsecond).
+    edge_covariance: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0])
     pending: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (sequence, expected shift)
     sequence: int = 0  # last Correction sent
     acknowledged: int = 0
     passes: dict[str, Pass] = field(default_factory=dict)  # open, per beacon
+    # No open pass has a last sighting before this (0: none checked yet): while the newest pose is
+    # within the pass end of it, none can have ended, and the passes are not looked through per pose.
+    passes_last_ns: int = 0
     ended: deque = field(default_factory=lambda: deque(maxlen=16))  # (beacon, pass) awaiting poses past the peak
     fixes: deque = field(default_factory=lambda: deque(maxlen=16))  # PositionFix awaiting poses past its time
     applied: dict[str, int] = field(default_factory=lambda: {name: 0 for name in CORRECTIONS})
     poses: int = 0
-    extra: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)))  # covariance the edge is missing
+    # The position covariance the edge is missing (hub/chair/hub.py), 2 x 2 row-major: floats, as it
+    # grows with every pose; `extra` is it as an array.
+    extra_m2: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0, 0.0])
     last_edge: tuple[int, float, float, int] | None = None  # (venue time, x, y, correction sequence) as sent
     refused_source: str = ""  # the video source whose fixes were refused in a row, most recent last
     refused: list = field(default_factory=list)  # ... as [(time, offset)]
     live_key: str = ""  # where its live and refined poses go (ChairHub.key_for)
     refined_key: str = ""
     pose_fields: dict = field(default_factory=dict)  # per track, an EstimatedPose holding what every one of its poses shares
+
+    @property
+    def extra(self) -> np.ndarray:
+        return np.array(self.extra_m2).reshape(2, 2)
+
+    @extra.setter
+    def extra(self, matrix: np.ndarray) -> None:
+        self.extra_m2 = np.asarray(matrix, dtype=float).ravel().tolist()
 
     def pose_at(self, time_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """Live position and its covariance at `time_ns` (the last pose not after it; the first if none)."""

@@ -32,30 +32,33 @@ class Publisher:
         self._session = session
         self._keys: dict[str, zenoh.KeyExpr] = {}
         self._zenoh_encodings: dict[str, zenoh.Encoding] = {}
-        self._encodings: dict[type, str] = {}  # message class -> its encoding (wire.encode's answer)
+        self._encodings: dict[type, zenoh.Encoding] = {}  # message class -> its encoding (wire.encode's answer)
         self._block = zenoh.CongestionControl.BLOCK
         self.sent = 0
 
     def publish(self, key: str, message: Any) -> None:
-        encoding = self._encodings.get(type(message))
-        if encoding is None:
-            payload, encoding = wire.encode(message)
-            self._encodings[type(message)] = encoding
-        else:
-            payload = message.SerializeToString()
-        self.publish_bytes(key, payload, encoding)
+        zenoh_encoding = self._encodings.get(type(message))
+        if zenoh_encoding is None:  # once per message class: wire.encode checks it is a protocol message
+            zenoh_encoding = self._encodings[type(message)] = self._encoding(wire.encode(message)[1])
+        self._put(key, message.SerializeToString(), zenoh_encoding)
 
     def publish_bytes(self, key: str, payload: bytes, encoding: str) -> None:
         """Publish an already-encoded payload (the replayer's path: no decode and re-encode)."""
+        self._put(key, payload, self._encoding(encoding))
+
+    def _encoding(self, encoding: str) -> zenoh.Encoding:
+        zenoh_encoding = self._zenoh_encodings.get(encoding)
+        if zenoh_encoding is None:
+            zenoh_encoding = self._zenoh_encodings[encoding] = zenoh.Encoding(encoding)
+        return zenoh_encoding
+
+    def _put(self, key: str, payload: bytes, zenoh_encoding: zenoh.Encoding) -> None:
         key_expr = self._keys.get(key)
         if key_expr is None:
             try:
                 key_expr = self._keys[key] = zenoh.KeyExpr(key)
             except zenoh.ZError as error:
                 raise BusError(f"cannot publish on key {key!r}: {error}") from None
-        zenoh_encoding = self._zenoh_encodings.get(encoding)
-        if zenoh_encoding is None:
-            zenoh_encoding = self._zenoh_encodings[encoding] = zenoh.Encoding(encoding)
         try:
             self._session.put(key_expr, payload, encoding=zenoh_encoding, congestion_control=self._block)
         except zenoh.ZError as error:

@@ -56,7 +56,8 @@ class LoopSmoother:
 def test_the_smoother_gives_the_loops_refined_poses_exactly(seed):
     rng = np.random.default_rng(seed)
     ring, loop = FixedLagSmoother(1.0, 52), LoopSmoother(1.0, 52)
-    t, out_ring, out_loop = 0, [], []
+    unbuilt = FixedLagSmoother(1.0, 52)  # every other pose's leavers not built (nobody took the refined track)
+    t, out_ring, out_loop, out_unbuilt = 0, [], [], []
     for k in range(3000):
         t += int(rng.choice([20, 20, 20, 7, 300, -40])) * MS  # steady, quick, a gap, out of order
         sd = rng.uniform(0.05, 2.0)
@@ -64,15 +65,19 @@ def test_the_smoother_gives_the_loops_refined_poses_exactly(seed):
         x, y, heading = rng.normal(0, 10, 3)
         out_ring += ring.add(t, x, y, heading, cov.ravel().tolist())
         out_loop += loop.add(t, x, y, heading, cov)
+        out_unbuilt += unbuilt.add(t, x, y, heading, cov.ravel().tolist(), build=k % 2 == 0)
         if rng.random() < 0.05:  # a correction measured now, a little earlier, or before every held pose
             measured = t - int(rng.choice([0, 200, 900, 5000])) * MS
             shift, after = rng.normal(0, 1, 2), rng.uniform(0.0, 1.0) * sd * sd
             ring.correct(measured, shift, after)
             loop.correct(measured, shift, after)
+            unbuilt.correct(measured, shift, after)
     out_ring += ring.flush()
     out_loop += [loop._emit(entry) for entry in loop.entries]
     assert len(out_ring) == len(out_loop) > 1500
     assert out_ring == out_loop  # every float equal, not close
+    assert len(out_unbuilt) == len(out_ring) - len(unbuilt) and 0 < out_unbuilt.count(None) < len(out_unbuilt)
+    assert all(mine is None or mine == theirs for mine, theirs in zip(out_unbuilt, out_ring))
 
 
 def test_a_correction_with_no_variance_before_stops_at_that_pose():
