@@ -66,6 +66,10 @@ from protocol.session import AgentKind, Mount, Session
 
 Kind = messages.CorrectionKind
 FIX_GATE_CHI2 = 13.8  # 99.9 %, 2 dof
+# Corrections sent and not yet acknowledged by the edge's poses, per agent, beyond which the oldest two
+# are held as one (taken back together, when the second is acknowledged): an edge that never takes
+# them (a replay, an edge deaf to the hub) would otherwise grow the list, and every pose sums it.
+PENDING_MAX = 16
 ACROSS_VARIANCE_M2 = 1e4  # a contact says nothing about the direction across the line between chairs
 PUSH_GATE_COS = math.cos(math.radians(60.0))  # both headings' errors, and pushes off the line between centres
 PUSH_LINE_SD = math.radians(20.0)  # spread of the pushes' line about the centres' (both headings, glancing contacts)
@@ -113,6 +117,7 @@ class HubCounters:
     pushes_not_opposed: int = 0  # impact pairs whose pushes did not point opposite ways: no contact
     relocks: int = 0  # video fixes taken after a run of consistent refusals
     late_impacts: int = 0  # arrived after their window had closed: paired with later ones only
+    pending_folded: int = 0  # corrections held together with the one after them (PENDING_MAX)
     refined_unbuilt: int = 0  # refined poses not made into messages: nobody wanted the track (`refined_wanted`)
 
 
@@ -514,6 +519,10 @@ class ChairHub:
         expected = gain @ measured
         view.sequence += 1
         view.pending.append((view.sequence, expected))
+        if len(view.pending) > PENDING_MAX:  # an edge not taking corrections: its two oldest become one
+            (_, first), (second_sequence, second) = view.pending[0], view.pending[1]
+            view.pending[0:2] = [(second_sequence, first + second)]
+            self.counters.pending_folded += 1
         keep = np.eye(2) - gain
         after = keep @ prior
         honest_after = keep @ honest @ keep.T + gain @ covariance @ gain.T

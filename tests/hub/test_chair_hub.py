@@ -283,3 +283,25 @@ def test_a_fix_inside_a_gap_in_the_poses_is_compared_with_where_the_chair_was_th
     taken = corrections(out)
     assert hub.counters.gated_out == 0 and len(taken) == 1
     assert taken[0].dx_m == pytest.approx(0.02, abs=0.02) and taken[0].dy_m == pytest.approx(0.0, abs=0.02)
+
+
+def test_corrections_an_edge_never_takes_are_held_in_bounded_memory_and_still_add_up():
+    """An edge deaf to the hub (a replay, a lost link) acknowledges nothing: the hub keeps adding what
+    it sent, in at most PENDING_MAX entries, and drops it all once a pose says the edge took it."""
+    from hub.chair.hub import PENDING_MAX
+
+    hub = ChairHub(venue(1), HubSettings(corrections=frozenset({"fix"})))
+    sent = []
+    for k in range(60):
+        t = int((k + 1) * 0.5 * S)
+        send(hub, pose("c0", t, 0.0, 0.0, sd=1.0))
+        fix = messages.new("PositionFix", timestamp_ns=t, agent_id="c0", kind=Kind.MANUAL, x_m=0.5, y_m=0.0,
+                           covariance=[0.01, 0.0, 0.0, 0.01], source_id="operator")
+        sent += corrections(send(hub, fix))
+        assert len(hub.agents["c0"].pending) <= PENDING_MAX
+    assert len(sent) == 60 and hub.counters.pending_folded == 60 - PENDING_MAX
+    live = send(hub, pose("c0", int(31 * S), 0.0, 0.0, sd=1.0))[0]
+    # the first fix moved the chair 0.495 m (gain 1 / 1.01), the rest the little left: none lost
+    assert live.x_m == pytest.approx(0.5, abs=0.005)
+    taken = send(hub, pose("c0", int(31.02 * S), 0.0, 0.0, sd=1.0, sequence=sent[-1].sequence))[0]
+    assert hub.agents["c0"].pending == [] and taken.x_m == 0.0  # the edge holds them all now
