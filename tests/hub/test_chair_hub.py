@@ -217,6 +217,16 @@ def test_clock_offset_is_the_lower_envelope_of_arrival_minus_sample_time():
     assert clocks.offset_ns("unknown") == 0
 
 
+def test_clock_offsets_keep_at_most_max_devices_the_first_seen_forgotten_first():
+    clocks = ClockOffsets(max_devices=4)
+    for k in range(10):  # a stream of made-up sensor ids
+        clocks.observe(f"fake-{k}", 0, (k + 1) * S)
+    assert len(clocks.envelopes) == 4 and clocks.forgotten == 6
+    assert clocks.offset_ns("fake-9") == 10 * S and clocks.offset_ns("fake-0") == 0  # the oldest went
+    with pytest.raises(ValueError, match="max_devices 0"):
+        ClockOffsets(max_devices=0)
+
+
 def video_fix(agent: str, t: int, x: float, y: float, sd: float = 0.085, source: str = "cam1:7"):
     return messages.new("PositionFix", timestamp_ns=t, agent_id=agent, kind=Kind.VIDEO, x_m=x, y_m=y,
                         covariance=[sd * sd, 0.0, 0.0, sd * sd], source_id=source)
