@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import logging
 import math
-import operator
 import queue
 import time
 from collections import deque
@@ -22,7 +21,6 @@ from reckon.transport.session import BusSession
 from reckon.transport.subscriptions import QUEUE_CAPACITY, Received, SubscriptionStats, declare_fifos
 
 log = logging.getLogger(__name__)
-_SOURCE_NS = operator.attrgetter("source_ns")  # a sweep's sort key (a C call, not a Python one per sample)
 
 
 class PolledSubscription:
@@ -104,7 +102,7 @@ class PolledSubscription:
                         stamp = sample.timestamp
                         append(Received(str(sample.key_expr), sample.payload.to_bytes(), str(sample.encoding),
                                         sample.kind == delete, now_ns,
-                                        now_ns if stamp is None else int(stamp.get_time_as_ntp64().as_nanos())))
+                                        None if stamp is None else int(stamp.get_time_as_ntp64().as_nanos())))
                         taken += 1
                 except zenoh.ZError:  # "channel is empty and closed": undeclared, or the session closed
                     self._handlers.remove(handler)
@@ -122,7 +120,7 @@ class PolledSubscription:
         self.stats.received += len(batch)
         self.stats.max_depth = max(self.stats.max_depth, len(batch))
         if self._by_source_time and len(batch) > 1:  # stable: one publisher's samples keep their order
-            batch.sort(key=_SOURCE_NS)
+            batch.sort(key=lambda item: now_ns if item.source_ns is None else item.source_ns)
         return batch
 
     def take(self, limit: int = 4096, timeout: float | None = None) -> list[Received] | None:

@@ -42,7 +42,7 @@ class Received(NamedTuple):
     encoding: str
     delete: bool  # a DELETE sample (e.g. the end-of-session marker), not a PUT
     received_ns: int  # this process's wall clock when the sample left Zenoh's FIFO (polled: its sweep began)
-    source_ns: int | None  # the publisher's clock at the put, when it stamps samples (else None; PolledSubscription: received_ns)
+    source_ns: int | None  # the publisher's clock at the put, when it stamps samples
 
     def decode(self) -> Any:
         """The protocol message; InputError for a foreign encoding or bad bytes."""
