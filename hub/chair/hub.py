@@ -59,6 +59,7 @@ import numpy as np
 from hub.chair.corrections import CONTACT_GATE_CHI2, BeaconLevels, ContactDistance, mahalanobis2
 from hub.chair.field_map import FieldMap, FieldMapSettings
 from hub.clocks import ClockOffsets
+from hub.dedup import RESET_S
 from hub.chair.smoother import FixedLagSmoother
 from hub.chair.view import CORRECTIONS, AgentView, Pass
 from protocol import keys, messages
@@ -117,6 +118,7 @@ class HubCounters:
     pushes_not_opposed: int = 0  # impact pairs whose pushes did not point opposite ways: no contact
     relocks: int = 0  # video fixes taken after a run of consistent refusals
     late_impacts: int = 0  # arrived after their window had closed: paired with later ones only
+    clock_restarts: int = 0  # an agent's poses went back in time by more than the dedup's reset (`_restart`)
     pending_folded: int = 0  # corrections held together with the one after them (PENDING_MAX)
     refined_unbuilt: int = 0  # refined poses not made into messages: nobody wanted the track (`refined_wanted`)
 
@@ -162,6 +164,7 @@ class ChairHub:
         self._window_ns = int(settings.pairing_window_s * 1e9)  # an impact group's span
         self._hold_ns = self._window_ns + settings.lateness_s * 1e9  # ... and how long it waits after its first
         self._stale_ns = settings.stale_s * 1e9
+        self._restart_ns = RESET_S * 1e9  # as the dedup: a stream this far behind its newest restarted
 
     # -- inputs ------------------------------------------------------------------------------
 
@@ -202,6 +205,15 @@ class ChairHub:
         view = self.agents[pose.agent_id]
         time_ns = self.clocks.to_venue(view.seat_id, pose.timestamp_ns)
         sequence, edge_x, edge_y, heading = pose.correction_sequence, pose.x_m, pose.y_m, pose.heading_rad
+        values = pose.covariance[:]  # the 3 x 3 as floats (a slice of the repeated field: a list)
+        # one sum for all twelve (NaN and inf carry through it): a pose that is not numbers would reach the
+        # smoother, the history and every correction looked up against it
+        if not math.isfinite(edge_x + edge_y + heading + sum(values)):
+            raise ValueError(f"EstimatedPose of {pose.agent_id} at {pose.timestamp_ns}: x_m {edge_x}, y_m {edge_y}, "
+                             f"heading_rad {heading}, covariance {values}: every value must be finite")
+        out: list[Any] = []
+        if view.latest_ns is not None and view.latest_ns - time_ns > self._restart_ns:
+            out = self._restart(view)
         if sequence < view.acknowledged:  # the edge restarted: it holds none of ours
             view.pending.clear()
         # The edge holds corrections this hub never made (sent by it before a restart, after its last
@@ -216,7 +228,6 @@ class ChairHub:
             x, y = float(xy[0]), float(xy[1])
         else:  # the usual case; + 0.0 as the sum above adds (it turns -0.0 into 0.0)
             x, y = edge_x + 0.0, edge_y + 0.0
-        values = pose.covariance[:]  # the 3 x 3 as floats (a slice of the repeated field: a list)
         if len(values) != 9:
             values = _IDENTITY
         view.edge_covariance = values
@@ -231,7 +242,7 @@ class ChairHub:
         honest[4] += e11
         view.history.append(time_ns, x, y, values, heading)
         view.poses += 1
-        out = [self._pose_message(view, time_ns, x, y, heading, honest, messages.Track.LIVE)]
+        out.append(self._pose_message(view, time_ns, x, y, heading, honest, messages.Track.LIVE))
         refined = view.smoother.add(time_ns, x, y, heading, values, self.refined_wanted)
         if refined:
             out += self._refined(view, refined)
@@ -242,6 +253,22 @@ class ChairHub:
         if self.field.due(time_ns):
             out += self.field.maps(time_ns)
         return out
+
+    def _restart(self, view: AgentView) -> list[Any]:
+        """The agent's time went back by more than the dedup's reset (its device's clock restarted, or the
+        pose before was a jump ahead): what is held on its old timeline (the smoother's poses, which leave
+        now as refined, the history, open passes and fixes waiting for poses) is closed, so that its poses
+        from here on are not all older than that one and refused."""
+        self.counters.clock_restarts += 1
+        refined = self._refined(view, view.smoother.flush())
+        view.history.clear()
+        view.passes.clear()
+        view.ended.clear()
+        view.fixes.clear()
+        view.latest_ns = view.last_edge = None
+        view.passes_last_ns = 0
+        self._oldest_impact_ns = None  # the agents short of the oldest impact are found again
+        return refined
 
     def _grow_extra(self, view: AgentView, time_ns: int, x: float, y: float, sequence: int) -> None:
         """The covariance the edge is missing grows with travel and time since the previous pose (the

@@ -32,6 +32,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from hub.dedup import RESET_S
 from hub.pedestrian.beacons import BeaconPasses, ProximityFix, gate
 from hub.pedestrian.guard import GuardSettings, MapGuard
 from hub.pedestrian.matching import DeadReckonedPose, MapMatcher
@@ -79,6 +80,7 @@ class PedestrianView:
     last_time_ns: int = -1
     poses: int = 0
     out_of_order: int = 0
+    clock_restarts: int = 0  # poses further back than the dedup's reset: the track starts again from them
     matched: int = 0  # poses that went through the matcher
     fallback_poses: int = 0  # live poses that are the edge's own track: the map contradicted it
     snaps: deque = field(default_factory=lambda: deque(maxlen=SNAPS_KEPT))  # the paper's snap decisions, newest
@@ -97,7 +99,8 @@ class PedestrianView:
         floors = f", {self.floor_changes} floor changes (on floor {self.floor})" if self.floor_changes else ""
         beacons = (f", beacon fixes {self.fixes_taken} taken, {self.fixes_refused} refused by the gate, "
                    f"{self.fixes_elsewhere} elsewhere" if self.passes is not None else "")
-        return (f"{self.poses} poses, {self.resets} stand resets, {self.out_of_order} out of order{fallback}{floors}"
+        restarts = f", {self.clock_restarts} clock restarts" if self.clock_restarts else ""
+        return (f"{self.poses} poses, {self.resets} stand resets, {self.out_of_order} out of order{restarts}{fallback}{floors}"
                 f"{beacons}; last {where}")
 
 
@@ -164,9 +167,20 @@ class PedestrianHub:
             return []
         if name != "EstimatedPose":
             return []
+        covariance_values = message.covariance[:]
+        if not math.isfinite(message.x_m + message.y_m + message.heading_rad + sum(covariance_values)):
+            raise ValueError(f"EstimatedPose of {message.agent_id} at {message.timestamp_ns}: x_m {message.x_m}, "
+                             f"y_m {message.y_m}, heading_rad {message.heading_rad}, covariance {covariance_values}: "
+                             "every value must be finite")
+        clock_restart = False
         if message.timestamp_ns <= view.last_time_ns:
-            view.out_of_order += 1
-            return []
+            if view.last_time_ns - message.timestamp_ns <= RESET_S * 1e9:
+                view.out_of_order += 1
+                return []
+            # further back than the dedup's reset: the phone's clock restarted, or the pose before was a
+            # jump ahead; refusing every later pose as older than that one would end the walker's track
+            view.clock_restarts += 1
+            clock_restart = True
         view.last_time_ns = message.timestamp_ns
         view.poses += 1
         if view.passes is not None:
@@ -174,7 +188,7 @@ class PedestrianHub:
                 self._fix(view, fix)
         covariance = np.asarray(message.covariance, dtype=float).reshape(3, 3) if len(message.covariance) == 9 else None
         previous_sequence, sequence = view.resets, message.correction_sequence
-        restarted = sequence != previous_sequence
+        restarted = sequence != previous_sequence or clock_restart
         view.resets = sequence
         out: list[Any] = []
         if message.floor != view.floor:

@@ -244,3 +244,20 @@ def test_the_scale_error_survives_a_stand_and_shrinks_when_k_is_learned():
     # a stand right after (too close to learn from) keeps it
     estimator.reset_to_stand(rows[-1].time_ns, 2.0 + surveyed_m, 5.0, 0.0)
     assert estimator.snapshot().step_scale_sd == pytest.approx(expected)
+
+
+def test_hub_starts_a_walkers_track_again_after_a_clock_jump_and_refuses_poses_that_are_not_numbers():
+    hub = PedestrianHub(session(floor_plan=True))
+    for i in range(10):
+        hub.on_message(pose(0.5 * i, 2.0 + 0.7 * i, 5.0))
+    hub.on_message(pose(1e6, 9.0, 5.0))  # one pose eleven days ahead (a clock glitch)
+    again = hub.on_message(pose(5.0, 9.5, 5.0))  # the stream goes on where it was
+    view = hub.agents["walker"]
+    assert view.clock_restarts == 1 and view.out_of_order == 0
+    assert [p.track for p in again if p.timestamp_ns == pose(5.0, 0, 0).timestamp_ns][:1] == [messages.Track.LIVE]
+    later = hub.on_message(pose(5.5, 9.9, 5.0))
+    assert any(p.track == messages.Track.LIVE for p in later) and "1 clock restarts" in view.describe()
+    bad = pose(6.0, float("inf"), 5.0)
+    with pytest.raises(ValueError, match=r"EstimatedPose of walker at .*x_m inf.*must be finite"):
+        hub.on_message(bad)
+    assert view.poses == 13

@@ -315,3 +315,35 @@ def test_corrections_an_edge_never_takes_are_held_in_bounded_memory_and_still_ad
     assert live.x_m == pytest.approx(0.5, abs=0.005)
     taken = send(hub, pose("c0", int(31.02 * S), 0.0, 0.0, sd=1.0, sequence=sent[-1].sequence))[0]
     assert hub.agents["c0"].pending == [] and taken.x_m == 0.0  # the edge holds them all now
+
+
+def test_a_pose_that_is_not_numbers_is_refused_by_name_and_changes_nothing():
+    hub = ChairHub(venue(1))
+    send(hub, pose("c0", S, 1.0, 2.0))
+    bad = pose("c0", S + S // 50, float("nan"), 2.0)
+    with pytest.raises(ValueError, match=r"EstimatedPose of c0 at .*x_m nan.*must be finite"):
+        send(hub, bad)
+    bad = pose("c0", S + S // 50, 1.0, 2.0)
+    bad.covariance[4] = float("inf")
+    with pytest.raises(ValueError, match="covariance .*inf"):
+        send(hub, bad)
+    assert hub.agents["c0"].poses == 1 and len(hub.agents["c0"].smoother) == 1
+
+
+def test_a_clock_jump_ahead_does_not_stop_the_refined_track():
+    """One pose far in the future (a device clock glitch), then the stream goes on: the hub starts the
+    agent's timeline again instead of refusing every later pose as older than that one."""
+    hub = ChairHub(venue(1), HubSettings(lag_s=1.0))
+    refined = []
+    def feed(start_s, count):
+        for k in range(count):
+            for out in send(hub, pose("c0", int((start_s + k / 50) * S), 1.0, 2.0)):
+                if out.track == messages.Track.REFINED:
+                    refined.append(out.timestamp_ns)
+    feed(1.0, 100)
+    send(hub, pose("c0", 10**6 * S, 1.0, 2.0))  # a jump of eleven days
+    before = len(refined)
+    feed(3.0, 200)
+    assert hub.counters.clock_restarts == 1
+    assert len(refined) > before + 100  # the poses after the jump leave as refined, 1 s late, as before it
+    assert hub.agents["c0"].latest_ns == int((3.0 + 199 / 50) * S)
