@@ -288,6 +288,9 @@ class ChairHub:
             extra[3] += grow
 
     def on_impact(self, event: Any) -> None:
+        if not math.isfinite(event.peak_g + event.forward_g + event.left_g):
+            raise ValueError(f"ImpactEvent of {event.agent_id} at {event.timestamp_ns}: peak_g {event.peak_g}, "
+                             f"forward_g {event.forward_g}, left_g {event.left_g}: every value must be finite")
         if event.peak_g < self.settings.impact_g or "collision" not in self.settings.corrections:
             return
         view = self.agents[event.agent_id]
@@ -301,6 +304,9 @@ class ChairHub:
         self.impacts.append((time_ns, event.agent_id, event.forward_g, event.left_g))
 
     def on_sighting(self, sighting: Any) -> list[Any]:
+        if not math.isfinite(sighting.rssi_dbm):  # NaN passes every comparison below and would join the level's peaks
+            raise ValueError(f"BeaconSighting of {sighting.agent_id} at {sighting.timestamp_ns}: rssi_dbm "
+                             f"{sighting.rssi_dbm} must be finite")
         if "beacon" not in self.settings.corrections or sighting.beacon_id not in self.beacons:
             return []
         if sighting.rssi_dbm < self.beacon_levels.pass_floor_dbm(sighting.beacon_id):
@@ -325,6 +331,9 @@ class ChairHub:
         if wanted not in self.settings.corrections:
             return []
         view = self.agents[fix.agent_id]
+        if not math.isfinite(fix.x_m + fix.y_m):
+            raise ValueError(f"PositionFix for {fix.agent_id} at {fix.timestamp_ns}: x_m {fix.x_m}, y_m {fix.y_m} "
+                             "must be finite")
         covariance = np.array(fix.covariance, dtype=float).reshape(2, 2) if len(fix.covariance) == 4 else None
         if covariance is None or not np.all(np.isfinite(covariance)) or np.linalg.det(covariance) <= 0:
             raise ValueError(f"PositionFix for {fix.agent_id}: covariance {list(fix.covariance)} is not a 2 x 2 "

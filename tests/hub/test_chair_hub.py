@@ -347,3 +347,19 @@ def test_a_clock_jump_ahead_does_not_stop_the_refined_track():
     assert hub.counters.clock_restarts == 1
     assert len(refined) > before + 100  # the poses after the jump leave as refined, 1 s late, as before it
     assert hub.agents["c0"].latest_ns == int((3.0 + 199 / 50) * S)
+
+
+@pytest.mark.parametrize("make, named", [
+    (lambda: impact("c0", 2 * S, peak=float("nan")), "ImpactEvent of c0 .*peak_g nan"),
+    (lambda: impact("c0", 2 * S, push=(float("inf"), 0.0)), "ImpactEvent of c0 .*forward_g inf"),
+    (lambda: messages.new("BeaconSighting", timestamp_ns=2 * S, agent_id="c0", sensor_id="c0-seat", beacon_id="goal-a",
+                          rssi_dbm=float("nan")), "BeaconSighting of c0 .*rssi_dbm nan"),
+    (lambda: messages.new("PositionFix", timestamp_ns=2 * S, agent_id="c0", kind=Kind.MANUAL, x_m=float("nan"), y_m=1.0,
+                          covariance=[0.01, 0.0, 0.0, 0.01], source_id="operator"), "PositionFix for c0 .*x_m nan"),
+])
+def test_inputs_that_are_not_numbers_are_refused_by_name_and_leave_nothing_behind(make, named):
+    hub = ChairHub(venue(2), HubSettings(corrections=frozenset({"beacon", "collision", "fix"})))
+    with pytest.raises(ValueError, match=named):
+        send(hub, make())
+    assert not hub.impacts and not hub.agents["c0"].passes and not hub.agents["c0"].fixes
+    assert not hub.beacon_levels.levels["goal-a"].peaks
