@@ -33,6 +33,7 @@ fixes and the camera's clock offset.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Any, Callable
 
@@ -142,13 +143,19 @@ class IdentityEngine:
 
     def on_frame(self, frame: Any) -> list[Any]:
         camera = frame.camera_id
-        self.counters.frames += 1
         lag_ns = self.lag_bins.setdefault(camera, int(round(self.settings.lag_prior_s / BIN_S))) * BIN_NS
         time_ns = frame.timestamp_ns - lag_ns
         new = []
         count = len(frame.track_id)
+        if len(frame.x_m) != count or len(frame.y_m) != count:  # zip would pair rows with other tracks' positions
+            raise ValueError(f"CameraFrame {camera} frame {frame.frame}: track_id has {count} entries, x_m "
+                             f"{len(frame.x_m)}, y_m {len(frame.y_m)}: they must be the same")
+        self.counters.frames += 1
         heights = frame.height_m if len(frame.height_m) == count else [float("nan")] * count  # none: no height cue
         for track_id, x, y, height in zip(frame.track_id, frame.x_m, frame.y_m, heights):
+            if not math.isfinite(x + y):  # a tracker's bad row: the rest of the frame stands
+                self.counters.rows_not_numbers += 1
+                continue
             key = (camera, int(track_id))
             track = self.tracks.get(key)
             if track is None:

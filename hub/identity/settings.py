@@ -108,6 +108,7 @@ class IdentityCounters:
     encounters: int = 0  # tracks whose evidence restarted after they met others
     shares: int = 0  # agents that shared a merged track (its holder's) after their own ended inside it
     fixes: int = 0
+    rows_not_numbers: int = 0  # camera rows whose x or y was NaN or inf: left out of the frame
     frames: int = 0
     tracks: int = 0
     lag_bins: int = 0

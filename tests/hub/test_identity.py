@@ -585,3 +585,29 @@ def test_gait_phase_learns_the_lag_from_held_pairs_and_ranks_the_one_in_step_fir
     assert np.argmin(cost[1, :2]) == 1  # ... and still finds its walker
     correlation = correlations[1, :2, int(np.flatnonzero(LAGS == 2)[0])]
     assert np.allclose(cost[1, :2], gait.weight * (gait.reference - correlation) * 12 / WINDOW_BINS)  # weighing less
+
+
+def test_a_camera_row_that_is_not_numbers_is_left_out_and_a_frame_of_unequal_columns_refused():
+    """A tracker's NaN row (the false track 6's, every frame) leaves the rest of the frame to name as before."""
+    tracks = [(1, "a", 0, 6), (2, "b", 0, 6), (3, "c", 0, 30), (4, "b", 6, 30), (5, "a", 6, 14), (6, "", 10, 14),
+              (7, "a", 14.5, 30)]
+    rng = np.random.default_rng(1)
+    events = [e for p, (t, xy) in CROSSING.items() for e in imu_batches(p, t, xy, rng)]
+    frames = camera_frames(CROSSING, tracks, rng, end_s=30.0)
+    for _, frame in frames:
+        for k, track in enumerate(frame.track_id):
+            if track == 6:
+                frame.x_m[k] = float("nan")
+    events = sorted(events + frames, key=lambda e: e[0])
+    engine = IdentityEngine(session(list(CROSSING)))
+    changes = []
+    for _, message in events:
+        changes += [(o.timestamp_ns / S, o.agent_id, o.track_id) for o in engine.on_message(message)
+                    if o.DESCRIPTOR.name == "TrackIdentity"]
+    assert engine.counters.rows_not_numbers == 80  # 4 s of track 6 at 20 frames a second
+    assert ("cam1", 6) not in engine.tracks and all(track != 6 for _, _, track in changes)
+    assert holder_at(changes, "a", 18.0) == 7 and holder_at(changes, "b", 10.0) == 4
+    frame = frames[0][1]
+    del frame.y_m[-1]
+    with pytest.raises(ValueError, match=r"CameraFrame cam1 frame \d+: track_id has 3 entries, x_m 3, y_m 2"):
+        engine.on_message(frame)
