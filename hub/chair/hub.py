@@ -258,7 +258,10 @@ class ChairHub:
         """The agent's time went back by more than the dedup's reset (its device's clock restarted, or the
         pose before was a jump ahead): what is held on its old timeline (the smoother's poses, which leave
         now as refined, the history, open passes and fixes waiting for poses) is closed, so that its poses
-        from here on are not all older than that one and refused."""
+        from here on are not all older than that one and refused. (A device whose own clock restarted reaches
+        the hub re-anchored by its edge, docs/device-faults.md; were its venue time to stay far behind the
+        others', it would hold the collision pairing back like any agent short of an impact, until the
+        clock offsets follow it.)"""
         self.counters.clock_restarts += 1
         refined = self._refined(view, view.smoother.flush())
         view.history.clear()
@@ -327,13 +330,13 @@ class ChairHub:
         return self._end_passes(view)
 
     def on_fix(self, fix: Any) -> list[Any]:
+        if not math.isfinite(fix.x_m + fix.y_m):
+            raise ValueError(f"PositionFix for {fix.agent_id} at {fix.timestamp_ns}: x_m {fix.x_m}, y_m {fix.y_m} "
+                             "must be finite")
         wanted = "camera" if fix.kind == Kind.VIDEO else "fix"
         if wanted not in self.settings.corrections:
             return []
         view = self.agents[fix.agent_id]
-        if not math.isfinite(fix.x_m + fix.y_m):
-            raise ValueError(f"PositionFix for {fix.agent_id} at {fix.timestamp_ns}: x_m {fix.x_m}, y_m {fix.y_m} "
-                             "must be finite")
         covariance = np.array(fix.covariance, dtype=float).reshape(2, 2) if len(fix.covariance) == 4 else None
         if covariance is None or not np.all(np.isfinite(covariance)) or np.linalg.det(covariance) <= 0:
             raise ValueError(f"PositionFix for {fix.agent_id}: covariance {list(fix.covariance)} is not a 2 x 2 "
