@@ -17,11 +17,13 @@ import numpy as np
 from hub.chair.hub import ChairHub, HubSettings
 from hub.chair.view import STALE_MPS
 from hub.identity.engine import IdentityEngine, IdentitySettings
+from hub.inputs import check_pose
 from hub.pedestrian.hub import PedestrianHub
 from protocol import keys, messages
 from protocol.session import Session
 
 _TRACK_IDENTITY, _CAMERA_FRAME = messages.CLASSES["TrackIdentity"], messages.CLASSES["CameraFrame"]
+_ESTIMATED_POSE = messages.CLASSES["EstimatedPose"]
 
 
 class VenueHub:
@@ -50,6 +52,8 @@ class VenueHub:
                                            clock=self.clock)
         if self.identity is None:  # the usual case
             return [] if camera else self._to_its_kind(message, arrival_ns)
+        if type(message) is _ESTIMATED_POSE:
+            check_pose(message)  # before the identity engine takes it in, not only the agent's own hub
         out: list[Any] = []
         for produced in self.identity.on_message(message):
             if messages.type_name(produced) == "PositionFix":

@@ -60,6 +60,7 @@ from hub.chair.corrections import CONTACT_GATE_CHI2, BeaconLevels, ContactDistan
 from hub.chair.field_map import FieldMap, FieldMapSettings
 from hub.clocks import ClockOffsets
 from hub.dedup import RESET_S
+from hub.inputs import check_pose
 from hub.chair.smoother import FixedLagSmoother
 from hub.chair.view import CORRECTIONS, AgentView, Pass
 from protocol import keys, messages
@@ -205,12 +206,7 @@ class ChairHub:
         view = self.agents[pose.agent_id]
         time_ns = self.clocks.to_venue(view.seat_id, pose.timestamp_ns)
         sequence, edge_x, edge_y, heading = pose.correction_sequence, pose.x_m, pose.y_m, pose.heading_rad
-        values = pose.covariance[:]  # the 3 x 3 as floats (a slice of the repeated field: a list)
-        # one sum for all twelve (NaN and inf carry through it): a pose that is not numbers would reach the
-        # smoother, the history and every correction looked up against it
-        if not math.isfinite(edge_x + edge_y + heading + sum(values)):
-            raise ValueError(f"EstimatedPose of {pose.agent_id} at {pose.timestamp_ns}: x_m {edge_x}, y_m {edge_y}, "
-                             f"heading_rad {heading}, covariance {values}: every value must be finite")
+        values = check_pose(pose)  # the 3 x 3 as floats; not numbers would reach the smoother, the history, the fixes
         out: list[Any] = []
         if view.latest_ns is not None and view.latest_ns - time_ns > self._restart_ns:
             out = self._restart(view)

@@ -33,6 +33,7 @@ from typing import Any, Callable
 import numpy as np
 
 from hub.dedup import RESET_S
+from hub.inputs import check_pose
 from hub.pedestrian.beacons import BeaconPasses, ProximityFix, gate
 from hub.pedestrian.guard import GuardSettings, MapGuard
 from hub.pedestrian.matching import DeadReckonedPose, MapMatcher
@@ -167,11 +168,7 @@ class PedestrianHub:
             return []
         if name != "EstimatedPose":
             return []
-        covariance_values = message.covariance[:]
-        if not math.isfinite(message.x_m + message.y_m + message.heading_rad + sum(covariance_values)):
-            raise ValueError(f"EstimatedPose of {message.agent_id} at {message.timestamp_ns}: x_m {message.x_m}, "
-                             f"y_m {message.y_m}, heading_rad {message.heading_rad}, covariance {covariance_values}: "
-                             "every value must be finite")
+        check_pose(message)
         clock_restart = False
         if message.timestamp_ns <= view.last_time_ns:
             if view.last_time_ns - message.timestamp_ns <= RESET_S * 1e9:

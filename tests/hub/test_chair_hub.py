@@ -363,3 +363,18 @@ def test_inputs_that_are_not_numbers_are_refused_by_name_and_leave_nothing_behin
         send(hub, make())
     assert not hub.impacts and not hub.agents["c0"].passes and not hub.agents["c0"].fixes
     assert not hub.beacon_levels.levels["goal-a"].peaks
+
+
+def test_with_a_camera_on_a_pose_that_is_not_numbers_is_refused_before_the_identity_engine_takes_it():
+    from hub.venue import VenueHub
+
+    hub = VenueHub(venue(1), HubSettings(corrections=frozenset({"camera"})))
+    hub.on_message(messages.new("CameraFrame", timestamp_ns=S, camera_id="cam1", frame=1), S)
+    assert hub.identity is not None
+    seen = []
+    take = hub.identity.on_message
+    hub.identity.on_message = lambda message: seen.append(message) or take(message)
+    hub.on_message(pose("c0", S, 1.0, 2.0), S)
+    with pytest.raises(ValueError, match="EstimatedPose of c0 .*heading_rad nan"):
+        hub.on_message(pose("c0", S + S // 50, 1.0, 2.0, heading=float("nan")), S + S // 50)
+    assert len(seen) == 1  # the good pose only
