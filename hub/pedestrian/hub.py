@@ -168,7 +168,7 @@ class PedestrianHub:
             return []
         if name != "EstimatedPose":
             return []
-        check_pose(message)
+        values = check_pose(message)
         clock_restart = False
         if message.timestamp_ns <= view.last_time_ns:
             if view.last_time_ns - message.timestamp_ns <= RESET_S * 1e9:
@@ -183,7 +183,7 @@ class PedestrianHub:
         if view.passes is not None:
             for fix in view.passes.tick(message.timestamp_ns):
                 self._fix(view, fix)
-        covariance = np.asarray(message.covariance, dtype=float).reshape(3, 3) if len(message.covariance) == 9 else None
+        covariance = np.asarray(values, dtype=float).reshape(3, 3) if len(values) == 9 else None
         previous_sequence, sequence = view.resets, message.correction_sequence
         restarted = sequence != previous_sequence or clock_restart
         view.resets = sequence

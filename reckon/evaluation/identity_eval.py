@@ -85,11 +85,13 @@ def evaluate_identity(data: SessionData, path: Path, progress: Callable[[str], N
     report.rows += rows
     report.rows.append(_ceiling(data, agents, delay_s))
     progress("identity: the paper's permutations")
-    report.rows.append(_paper(data, arrivals, agents, report.notes))
+    people_imu = _people(data, arrivals, agents)  # both offline searches read the same waists
+    report.rows.append(_paper(data, people_imu, agents, report.notes))
     walkers = [a for a in agents if data.session.agent(a).kind is AgentKind.PEDESTRIAN]
     if walkers:
         progress("identity: ours in hindsight")
-        report.rows.append(_hindsight(data, arrivals, walkers, report.notes, live))
+        report.rows.append(_hindsight(data, {a: imu for a, imu in people_imu.items() if a in walkers}, walkers,
+                                      report.notes, live))
     return report
 
 
@@ -257,8 +259,8 @@ def _verticals(people_imu: dict[str, tuple[np.ndarray, np.ndarray]],
     return {a: (frame_ns, vertical_acceleration(t, acc, frame_ns)) for a, (t, acc) in people_imu.items()}
 
 
-def _paper(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str], notes: list[str]) -> IdentityRow:
-    people_imu = _people(data, arrivals, agents)
+def _paper(data: SessionData, people_imu: dict[str, tuple[np.ndarray, np.ndarray]], agents: list[str],
+           notes: list[str]) -> IdentityRow:
     assignment: dict[str, dict[str, np.ndarray]] = {}
     elapsed, tried, needed, stopped = 0.0, 0, 1, ""
     models: dict[str, PaperModel] = {}
@@ -287,11 +289,10 @@ def _paper(data: SessionData, arrivals: list[tuple[int, Any]], agents: list[str]
     return row
 
 
-def _hindsight(data: SessionData, arrivals: list[tuple[int, Any]], walkers: list[str], notes: list[str],
-               live: dict[str, dict[str, np.ndarray]]) -> IdentityRow:
+def _hindsight(data: SessionData, people_imu: dict[str, tuple[np.ndarray, np.ndarray]], walkers: list[str],
+               notes: list[str], live: dict[str, dict[str, np.ndarray]]) -> IdentityRow:
     """Ours offline: every fragment of each camera at once, the regression learnt from the session (no labels),
-    the live engine's identities as evidence too."""
-    people_imu = _people(data, arrivals, walkers)
+    the live engine's identities as evidence too. people_imu: the walkers' (`_people`)."""
     assignment: dict[str, dict[str, np.ndarray]] = {}
     for camera, tracks in data.cameras.items():
         result = identify_hindsight(tracks, _verticals(people_imu, tracks.frame_ns), held=live.get(camera))
