@@ -108,6 +108,18 @@ def camera_truth(venue: str, camera: str) -> str:
     return f"{ROOT}/{venue}/{CAMERA}/truth_tracks/{camera}"
 
 
+# The hub's venue-wide outputs share it under the reserved agent chunk HUB, as cameras do under CAMERA.
+HUB = "hub"
+RESERVED = (CAMERA, HUB)
+
+
+def pose_batch(venue: str, track: str = "live") -> str:
+    """Every agent's poses of one track, several to a message (PoseBatch), from the hub:
+    `reckon/<venue>/hub/poses/<track>`. Not matched by `all_agents(venue, "pose/<track>")`, so a
+    consumer of single poses never also gets them batched."""
+    return f"{ROOT}/{venue}/{HUB}/poses/{track}"
+
+
 def identity(venue: str, agent: str) -> str:
     """The hub's TrackIdentity of one agent: which camera track it is."""
     return f"{ROOT}/{venue}/{agent}/identity"

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from protocol.errors import ConfigError
-from protocol.keys import CAMERA, check_id
+from protocol.keys import RESERVED, check_id
 
 FORMAT_VERSION = 1
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
@@ -332,8 +332,8 @@ def _agent(data: dict[str, Any], where: str) -> Agent:
         if mounts.count(mount) > 1:
             raise ConfigError(f"{where}.sensors: two sensors at mount {mount.value!r}")
     agent_id = check_id(_required(data, "id", where), f"{where}.id")
-    if agent_id == CAMERA:
-        raise ConfigError(f"{where}.id: {CAMERA!r} is reserved for camera keys; choose another agent id")
+    if agent_id in RESERVED:
+        raise ConfigError(f"{where}.id: {agent_id!r} is reserved for the {agent_id}'s keys; choose another agent id")
     return Agent(
         id=agent_id,
         kind=_enum(data, "kind", where, AgentKind, "wheelchair"),

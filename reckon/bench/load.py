@@ -5,8 +5,8 @@ reads their results:
 - the hub: `reckon hub --venue <500 chairs>`, as a venue runs it (with `hubs` > 1, one per shard of
   the courts, each with its own venue: load_spec.py);
 - a load generator (`python -m reckon.bench.load generate`): what the chairs' edges would send;
-- a watcher (`python -m reckon.bench.load watch`): every `pose/live` the hub publishes, stamped
-  on arrival.
+- a watcher (`python -m reckon.bench.load watch`): every live pose the hub publishes, taken as a
+  consumer of every agent takes them (`reckon/<venue>/hub/poses/live`, batched), stamped on arrival.
 
 The load, its venue and the chairs' motion: `load_spec`; the two helper processes: `load_traffic`;
 the numbers and the table: `load_report`.

@@ -7,7 +7,7 @@ each writes what it did into OUT for the run to read.
   BeaconSightings of its court's two goal beacons, a ClockSample per device and DeviceStatus at 1 Hz. It takes the hub's
   corrections back as an edge would (acknowledges them in `correction_sequence` and moves its
   estimate by the Kalman shift), so the hub's pending shifts stay as short as in a real game;
-- watcher: every `pose/live` the hub publishes, stamped on arrival.
+- watcher: every live pose the hub publishes (its batches: `reckon/<venue>/hub/poses/live`), stamped on arrival.
 
 With several hubs (`spec.hubs`), each chair's streams go under its court's venue (`spec.shard`),
 and both processes talk to every hub.
@@ -167,28 +167,29 @@ def watch(spec: LoadSpec, out: Path) -> None:
     expected = ticks * spec.agents
 
     def drain(subscription: DirectSubscription) -> None:
-        decode = messages.EstimatedPose.FromString
+        decode = messages.PoseBatch.FromString
         for item in subscription:  # ends once undeclared and empty
             arrived = item.received_ns  # as it left Zenoh's FIFO
-            pose = decode(item.payload)
-            i = index.get(pose.agent_id)
-            tick = -1 if i is None else (pose.timestamp_ns - spec.start_at_ns - int(phase_ns[i])) // period_ns
-            if not 0 <= tick < ticks:
-                tally["strays"] += 1
-                continue
-            if received_ns[tick, i]:
-                tally["duplicates"] += 1
-                continue
-            received_ns[tick, i] = arrived
-            published_ns[tick, i] = item.source_ns or 0
-            tally["live"] += 1
+            for pose in decode(item.payload).poses:
+                i = index.get(pose.agent_id)
+                tick = -1 if i is None else (pose.timestamp_ns - spec.start_at_ns - int(phase_ns[i])) // period_ns
+                if not 0 <= tick < ticks:
+                    tally["strays"] += 1
+                    continue
+                if received_ns[tick, i]:
+                    tally["duplicates"] += 1
+                    continue
+                received_ns[tick, i] = arrived
+                published_ns[tick, i] = item.source_ns or 0
+                tally["live"] += 1
             if tally["live"] == expected:
                 stop.set()
 
     with open_session(zenoh_config(listen=[spec.watcher_endpoint], connect=list(spec.hub_endpoints))) as bus:
         # A FIFO, not a ring: a live pose missed here would count as lost; a full FIFO holds the hub back.
-        # Every venue's live poses: `reckon/<venue>/<agent>/pose/live` whatever the venue.
-        subscription = DirectSubscription.fifo(bus, keys.all_agents(VENUE if spec.hubs == 1 else "*", "pose/live"),
+        # Every venue's live poses as the hub batches them for a consumer of all agents (the court view's
+        # way): `reckon/<venue>/hub/poses/live` whatever the venue.
+        subscription = DirectSubscription.fifo(bus, keys.pose_batch(VENUE if spec.hubs == 1 else "*", "live"),
                                                FIFO_CAPACITY)
         thread = threading.Thread(target=drain, args=(subscription,), daemon=True)
         thread.start()

@@ -92,16 +92,18 @@ class CourtView:
     def __init__(self, bus: BusSession, venue: str):
         self.poses: dict[str, tuple[int, float, float]] = {}
         self.corrections: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
-        # Only the latest pose is shown, so missing some costs nothing; every correction is counted.
-        self.poses_sub = DirectSubscription.ring(bus, keys.all_agents(venue, "pose/live"), 4096)
+        # Only the latest pose is shown, so missing some costs nothing; every correction is counted. Every
+        # agent's live poses: the hub's batches of them, a message per pass over its inputs, not per pose.
+        self.poses_sub = DirectSubscription.ring(bus, keys.pose_batch(venue, "live"), 1024)
         self.corrections_sub = DirectSubscription.fifo(bus, keys.all_agents(venue, "correction"), 4096)
 
     def drain(self) -> None:
         for subscriber in (self.poses_sub, self.corrections_sub):
             while (sample := subscriber.try_get()) is not None:
                 message = wire.decode(sample.encoding, sample.payload, sample.key)
-                if messages.type_name(message) == "EstimatedPose":
-                    self.poses[message.agent_id] = (message.timestamp_ns, message.x_m, message.y_m)
+                if messages.type_name(message) == "PoseBatch":
+                    for pose in message.poses:
+                        self.poses[pose.agent_id] = (pose.timestamp_ns, pose.x_m, pose.y_m)
                 else:
                     self.corrections[message.agent_id][messages.CorrectionKind(message.kind).name.lower()] += 1
 

@@ -7,7 +7,8 @@ Sequence (the session protocol of `protocol.bus`):
 2. subscribe to `reckon/<venue>/**` (blocking queue: a slow disk slows the publishers down, it
    never loses a message), then declare the liveliness token `reckon/<venue>/alive/recorder/<id>`
    and set `ready`: a replayer waiting for a recorder starts only now;
-3. write every protocol message with its key as topic; log time = when this process took it out
+3. write every protocol message with its key as topic (not the hub's pose batches,
+   `reckon/<venue>/hub/poses/*`: each of their poses comes on its own agent's key too); log time = when this process took it out
    of Zenoh (wall clock ns), publish time = the message's own `timestamp_ns` (SessionWriter);
 4. on `stop` (or, with `until_end`, on the source's end-of-session DELETE) stop receiving, write
    what was already received, close the log.
@@ -28,7 +29,7 @@ from pathlib import Path
 
 from protocol import bus as wire
 from protocol.errors import ConfigError, InputError
-from protocol.keys import ROOT, check_id
+from protocol.keys import ROOT, check_id, pose_batch
 from protocol.session import Session
 from protocol.session_log import SessionWriter
 from reckon.transport.bus import Alive, BusConfig, BusSession, Subscription, open_session, query
@@ -96,7 +97,7 @@ def record(config: BusConfig, venue: str, output: Path | str, stop: threading.Ev
                 Alive(session, venue, wire.Role.RECORDER, process_id):
             if ready is not None:
                 ready.set()
-            loop = _Loop(writer, subscription, wire.session_key(venue), stop, until_end, progress)
+            loop = _Loop(writer, subscription, wire.session_key(venue), pose_batch(venue, ""), stop, until_end, progress)
             loop.run()
             stats = subscription.stats
     return RecordSummary(str(output), venue, loop.written, dict(loop.topics), dict(loop.skipped), loop.end_seen,
@@ -106,9 +107,9 @@ def record(config: BusConfig, venue: str, output: Path | str, stop: threading.Ev
 class _Loop:
     """The write loop: drains the subscription into the writer until it ends."""
 
-    def __init__(self, writer: SessionWriter, subscription: Subscription, session_key: str,
+    def __init__(self, writer: SessionWriter, subscription: Subscription, session_key: str, batches: str,
                  stop: threading.Event, until_end: bool, progress: Callable[[int], None] | None):
-        self.writer, self.subscription, self.session_key = writer, subscription, session_key
+        self.writer, self.subscription, self.session_key, self.batches = writer, subscription, session_key, batches
         self.stop, self.until_end, self.progress = stop, until_end, progress
         self.written = 0
         self.topics: Counter[str] = Counter()
@@ -132,6 +133,8 @@ class _Loop:
                     if self.until_end:
                         self._finish()
                 continue  # the description itself (already in the log's metadata)
+            if item.key.startswith(self.batches):
+                continue
             try:
                 message = item.decode()
             except InputError as error:

@@ -35,6 +35,8 @@ def test_every_message_round_trips_with_schema_version():
         "TruthPose": dict(timestamp_ns=3, agent_id="a", x_m=1.25, y_m=-2.5, heading_rad=0.5),
         "EstimatedPose": dict(timestamp_ns=4, agent_id="a", x_m=1.0, y_m=2.0, covariance=[0.1] * 9,
                               method="paper", track=messages.Track.LIVE),
+        "PoseBatch": dict(timestamp_ns=4, poses=[messages.new("EstimatedPose", timestamp_ns=3, agent_id=agent,
+                                                              x_m=1.0, track=messages.Track.LIVE) for agent in "ab"]),
         "ImpactEvent": dict(timestamp_ns=5, agent_id="a", sensor_id="s", peak_g=9.5),
         "Correction": dict(timestamp_ns=6, agent_id="a", kind=messages.CorrectionKind.COLLISION, dx_m=0.5,
                            other_agent_id="b"),

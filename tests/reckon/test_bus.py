@@ -428,3 +428,22 @@ def test_recorder_stopped_before_a_description_writes_nothing(tmp_path):
     summary = record(zenoh_config(listen=[free_endpoint()]), VENUE, tmp_path / "none.mcap", stop)
     assert summary.written == 0 and "nothing written" in summary.problems[0]
     assert not (tmp_path / "none.mcap").exists()
+
+
+def test_a_recorder_takes_each_pose_on_its_own_key_never_the_hubs_batches(game, tmp_path):
+    """The hub sends a pose both on its agent's key and in a PoseBatch: the recording holds it once."""
+    endpoint, output, stop, ready = free_endpoint(), tmp_path / "venue.mcap", threading.Event(), threading.Event()
+    pose = messages.new("EstimatedPose", timestamp_ns=5, agent_id="chair01", x_m=1.0, track=messages.Track.LIVE)
+    recorder, recorded = run_in_thread(record, zenoh_config(listen=[endpoint]), VENUE, output, stop, ready,
+                                       description=read_session(game).session)
+    try:
+        assert ready.wait(WAIT_S)
+        with open_session(zenoh_config(connect=[endpoint])) as session, Publisher(session) as publisher:
+            publisher.publish(keys.pose(VENUE, "chair01", "live"), pose)
+            publisher.publish(keys.pose_batch(VENUE, "live"), messages.new("PoseBatch", timestamp_ns=6, poses=[pose]))
+            assert flush(session, wire.alive_selector(VENUE, wire.Role.RECORDER), WAIT_S)
+        stop.set()
+        written: RecordSummary = joined(recorder, recorded)
+    finally:
+        stop.set()
+    assert written.topics == {keys.pose(VENUE, "chair01", "live"): 1}

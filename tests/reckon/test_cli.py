@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -121,8 +122,10 @@ def test_demo_runs_end_to_end_on_a_short_game(tmp_path, capsys):
 
     assert reckon_main(["demo", "--players", "2", "--duration", "20", "--speed", "10", "--lag", "5",
                         "--out", str(tmp_path)]) == 0
-    out = capsys.readouterr().out
+    captured = capsys.readouterr()
+    out = captured.out
     assert "live pipeline" in out and "mean error live" in out
+    assert re.search(r"^chair01 +\d+\.\d+ +\d+\.\d+ ", captured.err, re.M)  # the court table took the hub's pose batches
     assert "paper" in out and "reckon" in out  # the offline comparison table
     assert (tmp_path / "hub.mcap").stat().st_size > 0 and any((tmp_path / "plots").iterdir())
 

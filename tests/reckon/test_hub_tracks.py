@@ -83,3 +83,50 @@ def test_the_refined_track_goes_out_only_once_someone_subscribes_to_it(free_endp
     assert [m.timestamp_ns for m in heard] == [m.timestamp_ns for m in made_refined[-len(heard):]]
     recording = [m for _, topic, m in LogMessages(tmp_path / "hub.mcap") if topic == refined_key]
     assert len(recording) == 400  # the recording holds the whole track
+
+
+
+def test_a_consumer_of_every_agent_takes_the_poses_batched(free_endpoint):
+    """Subscribed to `reckon/<venue>/hub/poses/<track>` only: every live and refined pose of both chairs
+    comes exactly once, in each chair's order, several to a message, and no pose counts as unheard."""
+    session = session_from_dict({"venue": {"name": "court"}, "agents": [
+        {"id": agent, "sensors": [{"id": f"{agent}-seat", "mount": "seat"}]} for agent in ("c0", "c1")]},
+        where="test")
+    endpoint, stop, ready = free_endpoint(), threading.Event(), threading.Event()
+    summaries = []
+    hub = threading.Thread(target=lambda: summaries.append(run_hub(
+        zenoh_config(listen=[endpoint]), session, stop, HubSettings(lag_s=1.0), ready=ready)), daemon=True)
+    hub.start()
+    assert ready.wait(WAIT_S)
+    poses = 300
+    try:
+        with open_session(zenoh_config(connect=[endpoint])) as bus, Publisher(bus) as edge, \
+                Subscription(bus, keys.pose_batch("court", "live"), capacity=4096) as live, \
+                Subscription(bus, keys.pose_batch("court", "refined"), capacity=4096) as refined:
+            edge_key = bus.declare_publisher(keys.pose("court", "c1", "edge"))
+            wait_until(lambda: edge_key.matching_status.matching, WAIT_S, "the hub's subscription to edge poses")
+            for k in range(poses):
+                for agent in ("c0", "c1"):
+                    pose = edge_pose(k)
+                    pose.agent_id = agent
+                    edge.publish(keys.pose("court", agent, "edge"), pose)
+            assert flush(bus, wire.alive_selector("court", wire.Role.HUB), WAIT_S)
+            stop.set()  # the refined poses still in the lag come out as the hub stops
+            hub.join(WAIT_S)
+            live.undeclare()
+            refined.undeclare()
+            live_batches, refined_batches = [item.decode() for item in live], [item.decode() for item in refined]
+            edge_key.undeclare()
+    finally:
+        stop.set()
+        hub.join(WAIT_S)
+    assert not hub.is_alive()
+    assert summaries[0].unheard == 0
+    expected = [edge_pose(k).timestamp_ns for k in range(poses)]
+    for batches, track in ((live_batches, messages.Track.LIVE), (refined_batches, messages.Track.REFINED)):
+        assert all(messages.type_name(batch) == "PoseBatch" for batch in batches)
+        got = [pose for batch in batches for pose in batch.poses]
+        assert {pose.track for pose in got} == {track}
+        for agent in ("c0", "c1"):
+            assert [pose.timestamp_ns for pose in got if pose.agent_id == agent] == expected, (track, agent)
+    assert len(live_batches) < 2 * poses  # several poses to a message
