@@ -45,6 +45,7 @@ CONTACT_FLOOR_SD_M = 0.1  # never trusted closer than this (chairs meet at any a
 CONTACT_PRIOR_WEIGHT = 5.0  # the prior counts as this many contacts
 CONTACT_MEMORY = 50.0  # contacts: forgetting of the learned distance
 CONTACT_GATE_CHI2 = 10.83  # 99.9 %, 1 dof
+FIX_GATE_CHI2 = 13.8  # 99.9 %, 2 dof
 
 
 def free_space_level_dbm(beacon: Beacon, horizontal_m: float) -> float:

@@ -12,16 +12,9 @@ drift, which an offset kept at the hub could not. Until an edge's pose says it h
 correction (`correction_sequence`), the hub adds the shift it expects the edge to make.
 
 All times here are venue time: device timestamps plus each device's clock offset (hub/clocks.py).
-- Collisions: impacts above `impact_g` within `pairing_window_s` of the first form a group, closed
-  once every live agent's poses have passed it by `lateness_s`. Every pair in the group is scored
-  by how well the two estimates fit a contact (chi-square with both covariances); a pair whose two
-  pushes (each impact's horizontal force, turned by its chair's heading) do not point opposite
-  ways is no contact; pairs inside the gate are taken best first, each chair at most once, so
-  three or more impacts at once still yield their pairs. A pair becomes one relative constraint:
-  each chair gets the measurement of the other's side (exactly the joint update of two
-  independent estimates). The pushes also say which way the other chair was (action and reaction
-  point along the line between the centres), so the constraint holds across the line too, within
-  `PUSH_LINE_SD` of its direction; without pushes it holds along the estimates' line only.
+- Collisions: impacts above `impact_g` seen by two chairs within `pairing_window_s`, paired into
+  contacts once every live agent's poses have passed them (hub/chair/pairing.py); each chair of a
+  contact gets the other's side as a measurement.
 - Beacons: one fix per candidate pass, at its strongest sighting: close or far, each where and as widely as its
   beacon's passes of that kind have shown (hub/chair/corrections.py).
 - Fixes: an operator's or video position at a time, gated like a beacon fix.
@@ -47,17 +40,16 @@ offset is added to `extra` and the fix is taken.
 
 from __future__ import annotations
 
-import itertools
 import math
-from collections import deque
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from hub.chair.corrections import CONTACT_GATE_CHI2, BeaconLevels, ContactDistance, mahalanobis2
+from hub.chair.corrections import FIX_GATE_CHI2, BeaconLevels, mahalanobis2
 from hub.chair.field_map import FieldMap, FieldMapSettings
+from hub.chair.pairing import ImpactPairing
 from hub.clocks import ClockOffsets
 from hub.dedup import RESET_S
 from hub.inputs import check_pose
@@ -67,14 +59,10 @@ from protocol import keys, messages
 from protocol.session import AgentKind, Mount, Session
 
 Kind = messages.CorrectionKind
-FIX_GATE_CHI2 = 13.8  # 99.9 %, 2 dof
 # Corrections sent and not yet acknowledged by the edge's poses, per agent, beyond which the oldest two
 # are held as one (taken back together, when the second is acknowledged): an edge that never takes
 # them (a replay, an edge deaf to the hub) would otherwise grow the list, and every pose sums it.
 PENDING_MAX = 16
-ACROSS_VARIANCE_M2 = 1e4  # a contact says nothing about the direction across the line between chairs
-PUSH_GATE_COS = math.cos(math.radians(60.0))  # both headings' errors, and pushes off the line between centres
-PUSH_LINE_SD = math.radians(20.0)  # spread of the pushes' line about the centres' (both headings, glancing contacts)
 _EstimatedPose = messages.EstimatedPose
 _IDENTITY = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]  # a pose's covariance when it came without one
 
@@ -132,7 +120,6 @@ class ChairHub:
         self.clocks = ClockOffsets()
         self.beacons = {beacon.id: beacon for beacon in session.venue.beacons}
         self.beacon_levels = BeaconLevels(session.venue.beacons)
-        self.contact = ContactDistance()
         chairs = [agent.id for agent in session.agents if agent.kind is AgentKind.WHEELCHAIR]
         self.field = FieldMap(session.venue, chairs, settings.field_map)
         ring = int(settings.lag_s * settings.pose_rate_hz) + 2
@@ -147,24 +134,13 @@ class ChairHub:
                 pose_fields={track: _EstimatedPose(schema_version=messages.SCHEMA_VERSION, agent_id=agent.id,
                                                    method="reckon", track=track)
                              for track in (messages.Track.LIVE, messages.Track.REFINED)})
-        self.impacts: deque[tuple[int, str]] = deque(maxlen=256)
-        self.closed_until_ns = -1
         self.newest_arrival_ns = 0
-        # The pairing waits until every live agent's poses pass the oldest open impact (+ the hold).
-        # The agents still short of it are found once per oldest impact and leave as they pass, so
-        # a pose costs O(1) instead of a scan of every agent (500 chairs: 25,000 scans a second).
-        self._oldest_impact_ns: int | None = None  # None: to be found again (the set below with it)
-        # A dict used as an ordered set: a set's iteration order depends on its add/discard history,
-        # so a snapshot restored and caught up (reckon/processes/checkpoint.py) would pickle differently.
-        self._short: dict[str, None] = {}
         self.counters = HubCounters()
+        self.pairing = ImpactPairing(settings.pairing_window_s, settings.lateness_s, settings.stale_s, self.counters)
         # Whether anyone takes the refined track (a subscriber, a recording: the hub process says, as it
         # learns): when nobody does, its poses still pass through the smoothers, never into messages.
         self.refined_wanted = True
         self._pass_end_ns = settings.pass_end_s * 1e9
-        self._window_ns = int(settings.pairing_window_s * 1e9)  # an impact group's span
-        self._hold_ns = self._window_ns + settings.lateness_s * 1e9  # ... and how long it waits after its first
-        self._stale_ns = settings.stale_s * 1e9
         self._restart_ns = RESET_S * 1e9  # as the dedup: a stream this far behind its newest restarted
 
     # -- inputs ------------------------------------------------------------------------------
@@ -244,8 +220,9 @@ class ChairHub:
             out += self._refined(view, refined)
         if view.passes or view.ended or view.fixes:
             out += self._end_passes(view)
-        if self.impacts:
-            out += self._close_groups(view)
+        if self.pairing.impacts:
+            out += [self._send(self.agents[fix.agent], fix.time_ns, fix.measured, fix.covariance, Kind.COLLISION,
+                               other=fix.other) for fix in self.pairing.close(view, self.agents, self.newest_arrival_ns)]
         if self.field.due(time_ns):
             out += self.field.maps(time_ns)
         return out
@@ -266,7 +243,7 @@ class ChairHub:
         view.fixes.clear()
         view.latest_ns = view.last_edge = None
         view.passes_last_ns = 0
-        self._oldest_impact_ns = None  # the agents short of the oldest impact are found again
+        self.pairing.agents_changed()  # the agents short of the oldest impact are found again
         return refined
 
     def _grow_extra(self, view: AgentView, time_ns: int, x: float, y: float, sequence: int) -> None:
@@ -294,13 +271,7 @@ class ChairHub:
             return
         view = self.agents[event.agent_id]
         time_ns = self.clocks.to_venue(event.sensor_id or view.seat_id, event.timestamp_ns)
-        self.counters.impacts += 1
-        if time_ns <= self.closed_until_ns:
-            self.counters.late_impacts += 1
-        if self._oldest_impact_ns is not None and (time_ns < self._oldest_impact_ns
-                                                   or len(self.impacts) == self.impacts.maxlen):
-            self._oldest_impact_ns = None  # an older impact, or the oldest falls out of the deque
-        self.impacts.append((time_ns, event.agent_id, event.forward_g, event.left_g))
+        self.pairing.add(time_ns, event.agent_id, event.forward_g, event.left_g)
 
     def on_sighting(self, sighting: Any) -> list[Any]:
         if not math.isfinite(sighting.rssi_dbm):  # NaN passes every comparison below and would join the level's peaks
@@ -423,122 +394,6 @@ class ChairHub:
         self.counters.relocks += 1
         return True
 
-    def _watermark(self) -> int | None:
-        """Venue time every live agent's poses have reached."""
-        stale_ns = self.settings.stale_s * 1e9
-        latest = [v.latest_ns for v in self.agents.values()
-                  if v.latest_ns is not None and self.newest_arrival_ns - v.arrival_ns <= stale_ns]
-        return min(latest) if latest else None
-
-    def _close_groups(self, posed: AgentView) -> list[Any]:
-        """Pair the impact groups every live agent's poses have passed (called with every pose)."""
-        if not self.impacts:
-            return []
-        window_ns, hold_ns = self._window_ns, self._hold_ns
-        if self._live_agent_short(posed, hold_ns):
-            return []  # the usual case: nothing to close yet
-        watermark = self._watermark()
-        if watermark is None or min(self.impacts)[0] + hold_ns > watermark:
-            return []  # the usual case: nothing to close yet
-        ordered = sorted(self.impacts)
-        out: list[Any] = []
-        while ordered and ordered[0][0] + hold_ns <= watermark:
-            first_ns = ordered[0][0]
-            group = [item for item in ordered if item[0] - first_ns <= window_ns]
-            ordered = ordered[len(group):]
-            self.closed_until_ns = max(self.closed_until_ns, group[-1][0])
-            pushes: dict[str, tuple[float, float]] = {}
-            for _, agent, forward_g, left_g in group:
-                pushes.setdefault(agent, (forward_g, left_g))  # an agent's first impact in the group
-            if len(pushes) >= 2:
-                self.counters.groups += 1
-                out += self._pair(first_ns, sorted(pushes), pushes)
-        self.impacts = deque(ordered, maxlen=self.impacts.maxlen)
-        self._oldest_impact_ns = None
-        return out
-
-    def _live_agent_short(self, posed: AgentView, hold_ns: float) -> bool:
-        """Whether a live agent's poses are still short of the oldest impact + `hold_ns` (then no
-        group can close: the watermark is below it). `posed` has just moved on; no other agent has."""
-        if self._oldest_impact_ns is None:
-            self._oldest_impact_ns = min(self.impacts)[0]
-            due = self._oldest_impact_ns + hold_ns
-            self._short = {v.agent_id: None for v in self.agents.values() if v.latest_ns is not None and v.latest_ns < due}
-        due = self._oldest_impact_ns + hold_ns
-        if posed.latest_ns < due:
-            self._short[posed.agent_id] = None  # also an agent whose first pose this is
-        else:
-            self._short.pop(posed.agent_id, None)
-        stale_ns = self._stale_ns
-        for agent_id in self._short:  # usually the first is live
-            if self.newest_arrival_ns - self.agents[agent_id].arrival_ns <= stale_ns:
-                return True
-        return False
-
-    def _push_line(self, a: str, b: str, time_ns: int, pushes: dict[str, tuple[float, float]]
-                   ) -> tuple[bool, np.ndarray | None]:
-        """(opposed, line): whether the two impacts' pushes point within `PUSH_GATE_COS` of opposite
-        ways, as one contact's action and reaction do (two bumps that merely coincide, a ball, a hard
-        push, the floor, point any way), and the line from b to a they say (unit, court frame).
-        Unknown pushes: (True, None)."""
-        heading_a, heading_b = self.agents[a].heading_at(time_ns), self.agents[b].heading_at(time_ns)
-        push_a = None if heading_a is None else _court_unit(pushes[a], heading_a)
-        push_b = None if heading_b is None else _court_unit(pushes[b], heading_b)
-        if push_a is None or push_b is None:
-            return True, None
-        if -float(push_a @ push_b) < PUSH_GATE_COS:
-            return False, None
-        line = push_a - push_b
-        return True, line / float(np.hypot(*line))
-
-    def _pair(self, time_ns: int, agents: list[str], pushes: dict[str, tuple[float, float]]) -> list[Any]:
-        candidates = []
-        contact_m, contact_var = self.contact.mean_m(), self.contact.variance_m2()
-        for a, b in itertools.combinations(agents, 2):
-            pose_a, pose_b = self.agents[a].pose_at(time_ns), self.agents[b].pose_at(time_ns)
-            if pose_a is None or pose_b is None:
-                continue
-            delta = pose_a[0] - pose_b[0]
-            distance = float(np.hypot(*delta))
-            if distance < 1e-6:
-                continue
-            unit = delta / distance
-            var_a, var_b = float(unit @ pose_a[1] @ unit), float(unit @ pose_b[1] @ unit)
-            innovation = contact_m - distance
-            score = innovation * innovation / (var_a + var_b + contact_var)
-            if score > CONTACT_GATE_CHI2:
-                self.counters.gated_out += 1
-                continue
-            opposed, line = self._push_line(a, b, time_ns, pushes)
-            if not opposed:
-                self.counters.pushes_not_opposed += 1
-            elif line is not None and mahalanobis2(contact_m * line - delta, pose_a[1] + pose_b[1]
-                                                   + _push_shape(line, contact_m, contact_var)) > FIX_GATE_CHI2:
-                self.counters.gated_out += 1  # where the pushes put the other chair, the poses do not
-            else:
-                candidates.append((score, a, b, unit, innovation, var_a, var_b, line, delta, pose_a[1], pose_b[1]))
-        out, taken = [], set()
-        for score, a, b, unit, innovation, var_a, var_b, line, delta, cov_a, cov_b in sorted(candidates,
-                                                                                               key=lambda c: c[0]):
-            if a in taken or b in taken:
-                continue
-            taken |= {a, b}
-            self.counters.pairs += 1
-            self.contact.taken(contact_m - innovation, var_a + var_b)
-            if line is not None:  # the pushes say where the other chair was, along the line and across it
-                shape = _push_shape(line, contact_m, contact_var)
-                offset = contact_m * line - delta
-                for me, other, measured, noise in ((a, b, offset, cov_b), (b, a, -offset, cov_a)):
-                    out.append(self._send(self.agents[me], time_ns, measured, noise + shape, Kind.COLLISION,
-                                          other=other))
-                continue
-            across = np.array([-unit[1], unit[0]])
-            for me, other, direction, noise in ((a, b, unit, var_b), (b, a, -unit, var_a)):
-                covariance = (noise + contact_var) * np.outer(direction, direction) + ACROSS_VARIANCE_M2 * np.outer(across, across)
-                out.append(self._send(self.agents[me], time_ns, direction * innovation, covariance, Kind.COLLISION,
-                                      other=other))
-        return out
-
     def _send(self, view: AgentView, time_ns: int, measured: np.ndarray, covariance: np.ndarray, kind: Kind,
               other: str = "", source: str = "") -> Any:
         """Record a correction, expect its effect on the live pose, and build the message.
@@ -605,21 +460,3 @@ def _psd(matrix: np.ndarray) -> np.ndarray:
     """The nearest symmetric positive semi-definite matrix (eigenvalues below zero to zero)."""
     values, vectors = np.linalg.eigh(0.5 * (matrix + matrix.T))
     return (vectors * np.maximum(values, 0.0)) @ vectors.T
-
-
-
-def _court_unit(push: tuple[float, float], heading: float) -> np.ndarray | None:
-    """A push in the chair frame (forward, left) as a unit vector in the court frame; None if unknown."""
-    forward, left = push
-    size = math.hypot(forward, left)
-    if size == 0.0:
-        return None
-    c, s = math.cos(heading), math.sin(heading)
-    return np.array([c * forward - s * left, s * forward + c * left]) / size
-
-
-def _push_shape(line: np.ndarray, contact_m: float, contact_var: float) -> np.ndarray:
-    """Covariance of where a contact's pushes put the other chair: the contact distance's spread along
-    their line, `PUSH_LINE_SD` of its direction across it."""
-    across = np.array([-line[1], line[0]])
-    return contact_var * np.outer(line, line) + (contact_m * PUSH_LINE_SD) ** 2 * np.outer(across, across)

@@ -361,7 +361,7 @@ def test_inputs_that_are_not_numbers_are_refused_by_name_and_leave_nothing_behin
     hub = ChairHub(venue(2), HubSettings(corrections=frozenset({"beacon", "collision", "fix"})))
     with pytest.raises(ValueError, match=named):
         send(hub, make())
-    assert not hub.impacts and not hub.agents["c0"].passes and not hub.agents["c0"].fixes
+    assert not hub.pairing.impacts and not hub.agents["c0"].passes and not hub.agents["c0"].fixes
     assert not hub.beacon_levels.levels["goal-a"].peaks
 
 
