@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hub.identity.engine import IdentityEngine, IdentitySettings
 from protocol import messages
 from protocol.session import Agent, AgentKind, Mount, Sensor, Session, Venue
 
@@ -176,3 +177,28 @@ CROSSING = {
     "c": waypoints_path([(0, 2.8, 0.4), (5, 2.8, 0.4), (7, 2.0, 1.5), (13, 2.0, 1.5), (18, 4.0, 1.0), (24, 1.5, 2.5),
                          (30, 1.5, 2.5)]),
 }
+
+
+def run(paths: dict, tracks: list, seed: int = 1, end_s: float = 30.0, settings: IdentitySettings = IdentitySettings(),
+        pose_of=None):
+    """Feed a scene in arrival order; returns (engine, [(time s, agent, track id)] identity changes)."""
+    rng = np.random.default_rng(seed)
+    events = [e for p, (t, xy) in paths.items() for e in imu_batches(p, t, xy, rng)]
+    events += camera_frames(paths, tracks, rng, end_s=end_s)
+    events.sort(key=lambda e: e[0])
+    engine = IdentityEngine(session(list(paths)), settings, pose_of=pose_of)
+    changes = []
+    for _, message in events:
+        for out in engine.on_message(message):
+            if out.DESCRIPTOR.name == "TrackIdentity":
+                changes.append((out.timestamp_ns / S, out.agent_id, out.track_id))
+    return engine, changes
+
+
+def holder_at(changes: list, agent: str, time_s: float) -> int:
+    """The track id the agent had at time_s (0: none)."""
+    held = 0
+    for t, who, track in changes:
+        if who == agent and t <= time_s:
+            held = track
+    return held
