@@ -103,6 +103,8 @@ def test_session_description_round_trips():
     (lambda d: d["agents"][0]["sensors"][0].pop("spin_axis"), "needs spin_axis"),
     (lambda d: d["venue"]["beacons"][0].pop("x_m"), "missing key 'x_m'"),
     (lambda d: d.update(agent=[]), "unknown key 'agent'"),
+    (lambda d: d["agents"][0].update(id="hub"), r"agents\[0\]\.id: 'hub' is reserved for the hub's keys"),
+    (lambda d: d["agents"][0].update(id="camera"), r"agents\[0\]\.id: 'camera' is reserved for the camera's keys"),
 ])
 def test_session_description_errors_name_the_key(mutate, message):
     import copy
