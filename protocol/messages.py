@@ -130,7 +130,7 @@ TABLES: dict[str, list[tuple[str, str, bool]]] = {
         ("map_fallback", "bool", False),
         ("floor", "int64", False),  # a pedestrian's floor: the last stand's, plus the changes the barometer saw
     ],
-    # Hub -> venue-wide consumers (the court view, the load bench's watcher): one track's poses of every
+    # Hub -> consumers of every agent (the demo's court table, the load bench's watcher): one track's poses of every
     # agent, as the hub made them in one pass over its inputs, each as it went out on its agent's key.
     # One message for the lot: at 500 chairs a put per pose was a fifth of the hub's CPU.
     "PoseBatch": [

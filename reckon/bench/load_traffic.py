@@ -187,8 +187,8 @@ def watch(spec: LoadSpec, out: Path) -> None:
 
     with open_session(zenoh_config(listen=[spec.watcher_endpoint], connect=list(spec.hub_endpoints))) as bus:
         # A FIFO, not a ring: a live pose missed here would count as lost; a full FIFO holds the hub back.
-        # Every venue's live poses as the hub batches them for a consumer of all agents (the court view's
-        # way): `reckon/<venue>/hub/poses/live` whatever the venue.
+        # Every venue's live poses as the hub batches them for a consumer of all agents (the demo's court
+        # table's way): `reckon/<venue>/hub/poses/live` whatever the venue.
         subscription = DirectSubscription.fifo(bus, keys.pose_batch(VENUE if spec.hubs == 1 else "*", "live"),
                                                FIFO_CAPACITY)
         thread = threading.Thread(target=drain, args=(subscription,), daemon=True)

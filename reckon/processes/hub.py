@@ -206,7 +206,7 @@ def run_hub(config: BusConfig, session: Session, stop: threading.Event, settings
             for out in outputs:
                 key = hub.key_for(out)
                 track = LIVE if key.endswith(LIVE) else REFINED if key.endswith(REFINED) else None
-                if track is None or (live_heard if track is LIVE else refined_heard).matching:
+                if track is None or (live_heard if track == LIVE else refined_heard).matching:
                     publisher.publish(key, out)
                 elif not batches.heard(track):
                     summary.unheard += 1

@@ -8,8 +8,9 @@ Sequence (the session protocol of `protocol.bus`):
    never loses a message), then declare the liveliness token `reckon/<venue>/alive/recorder/<id>`
    and set `ready`: a replayer waiting for a recorder starts only now;
 3. write every protocol message with its key as topic (not the hub's pose batches,
-   `reckon/<venue>/hub/poses/*`: each of their poses comes on its own agent's key too); log time = when this process took it out
-   of Zenoh (wall clock ns), publish time = the message's own `timestamp_ns` (SessionWriter);
+   `reckon/<venue>/hub/poses/*`: each of their poses comes on its own agent's key too); log time =
+   when this process took it out of Zenoh (wall clock ns), publish time = the message's own
+   `timestamp_ns` (SessionWriter);
 4. on `stop` (or, with `until_end`, on the source's end-of-session DELETE) stop receiving, write
    what was already received, close the log.
 
