@@ -33,7 +33,21 @@ METADATA_NAME = "reckon.session"
 # A chunk is compressed (zstd) and indexed when it fills, on the writer's thread: at mcap's default
 # 1 MiB that stalled the hub's recording for 3-4 ms every few seconds, in its live poses' latency
 # (the bench's worst 1 % fell on the chunks' ends). 64 KiB stalls an eighth as long; logs grow 4-7 %.
+# But each chunk ends with a message index record per channel in it, and a venue's channels grow with
+# its agents (a hub's recording: about six an agent): at 500 agents a 64 KiB chunk held about one
+# message per channel, and writing cost 9.1 us a message against 4.5 us in 1 MiB chunks (1,500
+# channels, round-robin). So a chunk holds CHUNK_BYTES_PER_AGENT an agent (at least 64 KiB, the size up
+# to 10 agents), up to 1 MiB, where a stall of a few ms is far inside what a venue that size needs of
+# its latency. The writer also keeps every chunk's index (an offset per channel in it) for the file's
+# summary until it closes: fewer, larger chunks hold that growth down too.
 CHUNK_BYTES = 64 * 1024
+CHUNK_BYTES_PER_AGENT = 6 * 1024
+CHUNK_BYTES_MAX = 1024 * 1024
+
+
+def chunk_bytes(agents: int) -> int:
+    """The chunk size of a session log of `agents` agents (CHUNK_BYTES above)."""
+    return min(CHUNK_BYTES_MAX, max(CHUNK_BYTES, CHUNK_BYTES_PER_AGENT * agents))
 
 
 class SessionWriter:
@@ -41,7 +55,7 @@ class SessionWriter:
 
     def __init__(self, path: Path | str, session: Session):
         self._file = open(path, "wb")
-        self._writer = Writer(self._file, chunk_size=CHUNK_BYTES)
+        self._writer = Writer(self._file, chunk_size=chunk_bytes(len(session.agents)))
         self._writer.add_metadata(METADATA_NAME, {"session_json": to_json(session)})
 
     def write(self, topic: str, message: Any, log_time_ns: int | None = None) -> None:

@@ -89,3 +89,29 @@ def test_a_damaged_chunk_in_a_complete_log_keeps_the_chunks_before_it(tmp_path):
     whole = serialised(LogMessages(tmp_path / "g.mcap", chair02))
     assert 0 < len(got) < len(whole) and got == whole[:len(got)]
     assert "damaged" in log.problems[0] and str(chunks[1].chunk_start_offset) in log.problems[0]
+
+
+def test_a_venue_of_many_agents_is_written_in_larger_chunks(tmp_path):
+    """Each chunk ends with an index record per channel in it: with 300 agents' channels 64 KiB chunks
+    would hold about one message a channel. The log's chunks grow with its agents (up to 1 MiB) and
+    it reads back whole, through the index too."""
+    from mcap.reader import make_reader
+
+    assert session_log.chunk_bytes(3) == session_log.chunk_bytes(10) == 64 * 1024
+    assert session_log.chunk_bytes(300) == session_log.chunk_bytes(5000) == 1024 * 1024
+    agents = [f"c{i:03d}" for i in range(300)]
+    session = session_from_dict({"venue": {"name": "court"}, "agents": [
+        {"id": a, "sensors": [{"id": f"{a}-seat", "mount": "seat"}]} for a in agents]}, where="test")
+    path = tmp_path / "venue.mcap"
+    with SessionWriter(path, session) as writer:
+        for k in range(20):
+            for a in agents:
+                writer.write(keys.pose("court", a, "live"), messages.new(
+                    "EstimatedPose", timestamp_ns=10**12 + k, agent_id=a, x_m=float(k), covariance=[0.1] * 9))
+    with open(path, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    sizes = [chunk.uncompressed_size for chunk in summary.chunk_indexes]
+    assert max(sizes) > 64 * 1024 and len(sizes) <= 2
+    one = LogMessages(path, lambda topic, name: keys.parse(topic)[1] == "c150")
+    assert [message.x_m for _, _, message in one] == [float(k) for k in range(20)]
+    assert sum(1 for _ in LogMessages(path)) == 20 * len(agents)
