@@ -31,6 +31,7 @@ from protocol import messages
 
 WINDOW = 4096  # positions remembered per counted stream: above the edges' resend window (1024 messages)
 RESET_S = 60.0  # a timed stream this far behind its newest message restarted; a resend spans ~12 s
+RESET_NS = int(RESET_S * 1e9)  # the hubs' own rule for an agent's poses going back (a clock restart)
 MAX_STREAMS = 65536  # 10 chairs use ~60; each stream costs ~1 KB at most
 
 

@@ -51,7 +51,7 @@ from hub.chair.corrections import FIX_GATE_CHI2, BeaconLevels, mahalanobis2
 from hub.chair.field_map import FieldMap, FieldMapSettings
 from hub.chair.pairing import ImpactPairing
 from hub.clocks import ClockOffsets
-from hub.dedup import RESET_S
+from hub.dedup import RESET_NS
 from hub.inputs import check_pose
 from hub.chair.smoother import FixedLagSmoother
 from hub.chair.view import CORRECTIONS, AgentView, Pass
@@ -141,7 +141,6 @@ class ChairHub:
         # learns): when nobody does, its poses still pass through the smoothers, never into messages.
         self.refined_wanted = True
         self._pass_end_ns = settings.pass_end_s * 1e9
-        self._restart_ns = RESET_S * 1e9  # as the dedup: a stream this far behind its newest restarted
 
     # -- inputs ------------------------------------------------------------------------------
 
@@ -184,7 +183,7 @@ class ChairHub:
         sequence, edge_x, edge_y, heading = pose.correction_sequence, pose.x_m, pose.y_m, pose.heading_rad
         values = check_pose(pose)  # the 3 x 3 as floats; not numbers would reach the smoother, the history, the fixes
         out: list[Any] = []
-        if view.latest_ns is not None and view.latest_ns - time_ns > self._restart_ns:
+        if view.latest_ns is not None and view.latest_ns - time_ns > RESET_NS:
             out = self._restart(view)
         if sequence < view.acknowledged:  # the edge restarted: it holds none of ours
             view.pending.clear()

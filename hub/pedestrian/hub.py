@@ -32,7 +32,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hub.dedup import RESET_S
+from hub.dedup import RESET_NS
 from hub.inputs import check_pose
 from hub.pedestrian.beacons import BeaconPasses, ProximityFix, gate
 from hub.pedestrian.guard import GuardSettings, MapGuard
@@ -171,7 +171,7 @@ class PedestrianHub:
         values = check_pose(message)
         clock_restart = False
         if message.timestamp_ns <= view.last_time_ns:
-            if view.last_time_ns - message.timestamp_ns <= RESET_S * 1e9:
+            if view.last_time_ns - message.timestamp_ns <= RESET_NS:
                 view.out_of_order += 1
                 return []
             # further back than the dedup's reset: the phone's clock restarted, or the pose before was a
