@@ -85,7 +85,6 @@ def test_the_refined_track_goes_out_only_once_someone_subscribes_to_it(free_endp
     assert len(recording) == 400  # the recording holds the whole track
 
 
-
 def test_a_consumer_of_every_agent_takes_the_poses_batched(free_endpoint):
     """Subscribed to `reckon/<venue>/hub/poses/<track>` only: every live and refined pose of both chairs
     comes exactly once, in each chair's order, several to a message, and no pose counts as unheard."""
