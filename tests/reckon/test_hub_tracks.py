@@ -15,7 +15,9 @@ from protocol import bus as wire
 from protocol import keys, messages
 from protocol.session import session_from_dict
 from protocol.session_log import LogMessages
+from reckon.processes import hub as hub_process
 from reckon.processes.hub import run_hub
+from reckon.transport.matching import Listened
 from reckon.transport.bus import Publisher, Subscription, flush, open_session, zenoh_config
 from support.waits import wait_until
 
@@ -32,8 +34,28 @@ def edge_pose(k: int):
                         covariance=[0.25, 0, 0, 0, 0.25, 0, 0, 0, 0.01], method="reckon", track=messages.Track.LIVE)
 
 
+@pytest.fixture
+def hub_hears(monkeypatch):
+    """`hub_hears(key_expr)` returns once the hub's own matching listener on key_expr has seen a
+    subscriber: Zenoh tells it on its own thread, so poses the hub makes before that are rightly
+    unheard, and a test that subscribes and publishes at once would race it."""
+    followed: list[Listened] = []
+
+    class Followed(Listened):
+        def __init__(self, session, key_expr):
+            super().__init__(session, key_expr)
+            followed.append(self)
+
+    monkeypatch.setattr(hub_process, "Listened", Followed)
+
+    def hears(key_expr: str) -> None:
+        wait_until(lambda: any(f.key_expr == key_expr and f.matching for f in followed), WAIT_S,
+                   f"the hub to see a subscriber to {key_expr}")
+    return hears
+
+
 @pytest.mark.parametrize("recorded", [True, False])
-def test_the_refined_track_goes_out_only_once_someone_subscribes_to_it(free_endpoint, tmp_path, recorded):
+def test_the_refined_track_goes_out_only_once_someone_subscribes_to_it(free_endpoint, tmp_path, recorded, hub_hears):
     """Recorded, every refined pose is made (and recorded); not recorded, those nobody subscribed to are
     not even made, and the summary counts them all the same."""
     endpoint, stop, ready = free_endpoint(), threading.Event(), threading.Event()
@@ -53,10 +75,12 @@ def test_the_refined_track_goes_out_only_once_someone_subscribes_to_it(free_endp
                 Subscription(bus, live_key, capacity=4096) as live:
             edge_key = bus.declare_publisher(keys.pose("court", "c0", "edge"))
             wait_until(lambda: edge_key.matching_status.matching, WAIT_S, "the hub's subscription to edge poses")
+            hub_hears(keys.all_agents("court", "pose/live"))
             for k in range(200):  # 4 s of poses: the first 3 s come out refined, and nobody wants them yet
                 edge.publish(keys.pose("court", "c0", "edge"), edge_pose(k))
             wait_until(lambda: live.stats.received >= 200, WAIT_S, "the hub's live poses")
             with Subscription(bus, refined_key, capacity=4096) as refined:
+                hub_hears(keys.all_agents("court", "pose/refined"))
                 for k in range(200, 400):
                     edge.publish(keys.pose("court", "c0", "edge"), edge_pose(k))
                 assert flush(bus, wire.alive_selector("court", wire.Role.HUB), WAIT_S)
@@ -85,7 +109,7 @@ def test_the_refined_track_goes_out_only_once_someone_subscribes_to_it(free_endp
     assert len(recording) == 400  # the recording holds the whole track
 
 
-def test_a_consumer_of_every_agent_takes_the_poses_batched(free_endpoint):
+def test_a_consumer_of_every_agent_takes_the_poses_batched(free_endpoint, hub_hears):
     """Subscribed to `reckon/<venue>/hub/poses/<track>` only: every live and refined pose of both chairs
     comes exactly once, in each chair's order, several to a message, and no pose counts as unheard."""
     session = session_from_dict({"venue": {"name": "court"}, "agents": [
@@ -104,6 +128,8 @@ def test_a_consumer_of_every_agent_takes_the_poses_batched(free_endpoint):
                 Subscription(bus, keys.pose_batch("court", "refined"), capacity=4096) as refined:
             edge_key = bus.declare_publisher(keys.pose("court", "c1", "edge"))
             wait_until(lambda: edge_key.matching_status.matching, WAIT_S, "the hub's subscription to edge poses")
+            hub_hears(keys.pose_batch("court", "live"))
+            hub_hears(keys.pose_batch("court", "refined"))
             for k in range(poses):
                 for agent in ("c0", "c1"):
                     pose = edge_pose(k)
