@@ -105,6 +105,7 @@ class HubCounters:
     pairs: int = 0
     gated_out: int = 0  # candidate corrections the gate rejected
     pushes_not_opposed: int = 0  # impact pairs whose pushes did not point opposite ways: no contact
+    not_simultaneous: int = 0  # impact pairs further apart in time than the contacts taken (pairing.ContactTiming)
     relocks: int = 0  # video fixes taken after a run of consistent refusals
     late_impacts: int = 0  # arrived after their window had closed: paired with later ones only
     clock_restarts: int = 0  # an agent's poses went back in time by more than the dedup's reset (`_restart`)

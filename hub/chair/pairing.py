@@ -3,9 +3,11 @@
 Impacts within `window_s` of the first form a group, closed once every live agent's poses have
 passed it by `lateness_s` (an agent silent for `stale_s`, hub clock, no longer holds it back). Every
 pair in the group is scored by how well the two estimates fit a contact (chi-square with both
-covariances); a pair whose two pushes (each impact's horizontal force, turned by its chair's
-heading) do not point opposite ways is no contact; pairs inside the gate are taken best first, each
-chair at most once, so three or more impacts at once still yield their pairs. A pair becomes one
+covariances) and how close in time its two impacts came (chi-square against the spread the contacts
+taken so far show, `ContactTiming`: a pile-up of two contacts 0.1 s apart is two pairs, not a
+cross-pairing of its four impacts); a pair whose two pushes (each impact's horizontal force, turned
+by its chair's heading) do not point opposite ways is no contact; pairs inside the gates are taken
+best first, each chair at most once, so three or more impacts at once still yield their pairs. A pair becomes one
 relative constraint: each chair gets the measurement of the other's side (exactly the joint update
 of two independent estimates). The pushes also say which way the other chair was (action and
 reaction point along the line between the centres), so the constraint holds across the line too,
@@ -21,12 +23,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from hub.chair.corrections import CONTACT_GATE_CHI2, FIX_GATE_CHI2, ContactDistance, mahalanobis2
+from hub.chair.corrections import CONTACT_GATE_CHI2, FIX_GATE_CHI2, ContactDistance, ContactTiming, mahalanobis2
 from hub.chair.view import AgentView
 
 ACROSS_VARIANCE_M2 = 1e4  # a contact says nothing about the direction across the line between chairs
 PUSH_GATE_COS = math.cos(math.radians(60.0))  # both headings' errors, and pushes off the line between centres
 PUSH_LINE_SD = math.radians(20.0)  # spread of the pushes' line about the centres' (both headings, glancing contacts)
+WINDOW_SDS = 3.29  # the pairing window spans this many of the timing prior's sd either way (99.9 %)
 IMPACTS_HELD = 256  # open impacts, venue-wide; beyond that the oldest goes unpaired
 
 
@@ -47,6 +50,7 @@ class ImpactPairing:
     def __init__(self, window_s: float, lateness_s: float, stale_s: float, counters: Any):
         self.counters = counters
         self.contact = ContactDistance()
+        self.timing = ContactTiming(prior_sd_s=window_s / WINDOW_SDS)
         self.impacts: deque[tuple[int, str, float, float]] = deque(maxlen=IMPACTS_HELD)  # (time, agent, push)
         self.closed_until_ns = -1
         self._window_ns = int(window_s * 1e9)  # a group's span
@@ -89,12 +93,12 @@ class ImpactPairing:
             group = [item for item in ordered if item[0] - first_ns <= window_ns]
             ordered = ordered[len(group):]
             self.closed_until_ns = max(self.closed_until_ns, group[-1][0])
-            pushes: dict[str, tuple[float, float]] = {}
-            for _, agent, forward_g, left_g in group:
-                pushes.setdefault(agent, (forward_g, left_g))  # an agent's first impact in the group
-            if len(pushes) >= 2:
+            firsts: dict[str, tuple[int, float, float]] = {}
+            for impact_ns, agent, forward_g, left_g in group:
+                firsts.setdefault(agent, (impact_ns, forward_g, left_g))  # an agent's first impact in the group
+            if len(firsts) >= 2:
                 self.counters.groups += 1
-                out += self._pair(first_ns, sorted(pushes), pushes, agents)
+                out += self._pair(first_ns, sorted(firsts), firsts, agents)
         self.impacts = deque(ordered, maxlen=self.impacts.maxlen)
         self._oldest_ns = None
         return out
@@ -124,11 +128,17 @@ class ImpactPairing:
                 return True
         return False
 
-    def _pair(self, time_ns: int, names: list[str], pushes: dict[str, tuple[float, float]],
+    def _pair(self, time_ns: int, names: list[str], firsts: dict[str, tuple[int, float, float]],
               agents: dict[str, AgentView]) -> list[ContactFix]:
         candidates = []
         contact_m, contact_var = self.contact.mean_m(), self.contact.variance_m2()
+        timing_var = self.timing.variance_s2()
         for a, b in itertools.combinations(names, 2):
+            apart_s = (firsts[a][0] - firsts[b][0]) * 1e-9
+            timing_score = apart_s * apart_s / timing_var
+            if timing_score > CONTACT_GATE_CHI2:
+                self.counters.not_simultaneous += 1
+                continue
             pose_a, pose_b = agents[a].pose_at(time_ns), agents[b].pose_at(time_ns)
             if pose_a is None or pose_b is None:
                 continue
@@ -144,23 +154,25 @@ class ImpactPairing:
                 self.counters.gated_out += 1
                 continue
             opposed, line = _push_line(agents[a].heading_at(time_ns), agents[b].heading_at(time_ns),
-                                       pushes[a], pushes[b])
+                                       firsts[a][1:], firsts[b][1:])
             if not opposed:
                 self.counters.pushes_not_opposed += 1
             elif line is not None and mahalanobis2(contact_m * line - delta, pose_a[1] + pose_b[1]
                                                    + _push_shape(line, contact_m, contact_var)) > FIX_GATE_CHI2:
                 self.counters.gated_out += 1  # where the pushes put the other chair, the poses do not
             else:
-                candidates.append((score, a, b, unit, innovation, var_a, var_b, line, delta, pose_a[1], pose_b[1]))
+                candidates.append((score + timing_score, a, b, unit, innovation, var_a, var_b, line, delta,
+                                   pose_a[1], pose_b[1], apart_s))
         out: list[ContactFix] = []
         taken: set[str] = set()
-        for score, a, b, unit, innovation, var_a, var_b, line, delta, cov_a, cov_b in sorted(candidates,
-                                                                                               key=lambda c: c[0]):
+        for _, a, b, unit, innovation, var_a, var_b, line, delta, cov_a, cov_b, apart_s in sorted(candidates,
+                                                                                                 key=lambda c: c[0]):
             if a in taken or b in taken:
                 continue
             taken |= {a, b}
             self.counters.pairs += 1
             self.contact.taken(contact_m - innovation, var_a + var_b)
+            self.timing.taken(apart_s)
             if line is not None:  # the pushes say where the other chair was, along the line and across it
                 shape = _push_shape(line, contact_m, contact_var)
                 offset = contact_m * line - delta

@@ -128,6 +128,39 @@ def test_four_impacts_at_once_give_two_pairs():
     assert hub.counters.pairs == 2
 
 
+def test_a_pile_up_of_two_contacts_pairs_the_impacts_that_came_together():
+    """Four chairs on a 0.9 m square: c0-c2 touch, and 0.1 s later c1-c3. By distance alone every side
+    of the square fits a contact (and c0-c1 comes first by name); the timing says which impacts belong
+    together."""
+    hub = ChairHub(venue(4), HubSettings(corrections=frozenset({"collision"})))
+    positions = {"c0": (5.0, 5.0), "c1": (5.9, 5.0), "c2": (5.0, 5.9), "c3": (5.9, 5.9)}
+    feed_poses(hub, positions, 0.0, 2.0)
+    for agent, t in (("c0", 2.0), ("c2", 2.001), ("c1", 2.1), ("c3", 2.1005)):
+        send(hub, impact(agent, int(t * S)))
+    out = corrections(feed_poses(hub, positions, 2.0, 4.0))
+    assert hub.counters.groups == 1 and hub.counters.pairs == 2
+    assert sorted((c.agent_id, c.other_agent_id) for c in out) == [("c0", "c2"), ("c1", "c3"), ("c2", "c0"), ("c3", "c1")]
+
+
+def test_once_contacts_have_shown_how_close_in_time_their_impacts_come_a_late_one_is_no_contact():
+    hub = ChairHub(venue(2), HubSettings(corrections=frozenset({"collision"})))
+    positions = {"c0": (10.0, 5.0), "c1": (10.9, 5.0)}
+    for k in range(40):  # contacts whose impacts came within 2 ms of each other
+        start = 4.0 * k
+        feed_poses(hub, positions, start, start + 2.0)
+        send(hub, impact("c0", int((start + 2.0) * S)))
+        send(hub, impact("c1", int((start + 2.0 + 0.002 * (k % 2)) * S)))
+        feed_poses(hub, positions, start + 2.0, start + 4.0)
+    assert hub.counters.pairs == 40 and hub.counters.not_simultaneous == 0
+    sd_s = hub.pairing.timing.variance_s2() ** 0.5
+    assert 0.003 <= sd_s < 0.025  # learnt down from the prior's 45 ms, still above the floor
+    feed_poses(hub, positions, 160.0, 162.0)
+    send(hub, impact("c0", int(162.0 * S)))
+    send(hub, impact("c1", int(162.12 * S)))  # inside the pairing window, but 0.12 s apart
+    assert corrections(feed_poses(hub, positions, 162.0, 164.0)) == []
+    assert hub.counters.pairs == 40 and hub.counters.not_simultaneous == 1
+
+
 def test_a_lone_impact_and_a_far_pair_change_nothing():
     hub = ChairHub(venue(2), HubSettings(corrections=frozenset({"collision"})))
     positions = {"c0": (2.0, 2.0), "c1": (25.0, 12.0)}  # 24 m apart with 0.5 m uncertainty: no contact
