@@ -10,6 +10,7 @@ from typing import Callable
 import numpy as np
 
 from edge.chair.paper.impacts import PAPER_THRESHOLD_G
+from hub.chair.hub import HubSettings
 from hub.chair.paper import Collision, pair_impacts
 from protocol.errors import InputError
 from protocol.session_log import SessionData, read_session
@@ -56,6 +57,7 @@ class EvalReport:
     court_m: tuple[float, float]
     rows: list[ResultRow] = field(default_factory=list)
     detection: list[DetectionScore] = field(default_factory=list)
+    contact_pairs: DetectionScore | None = None  # ours: the contacts the hub took (collisions only), against the true ones
     problems: list[str] = field(default_factory=list)
 
 
@@ -144,4 +146,7 @@ def evaluate_data(data: SessionData, path: Path, progress: Callable[[str], None]
                 report.rows.append(ResultRow("reckon", heading_name, corrections, track,
                                              error_summary(error, frame_s), estimate.corrections_applied,
                                              np.nanmean(error, axis=0), estimate.x_m, estimate.y_m, nees))
+            if heading_name == HeadingSource.SENSORS.value and corrections == ("collision",):
+                report.contact_pairs = score_collisions(HubSettings.impact_g, [Collision(t, a, b) for t, a, b in
+                                                                               estimate.contacts], data.contacts)
     return report

@@ -41,6 +41,7 @@ class ReckonEstimate:
     y_m: np.ndarray
     corrections_applied: int
     covariance_m2: np.ndarray | None = None  # (agents, frames, 3): xx, xy, yy of the pose's stated covariance
+    contacts: tuple[tuple[int, str, str], ...] = ()  # the hub's contacts, (venue time, agent, other) per pair
 
 
 def log_inputs(path: Path | str) -> list[tuple[int, Any]]:
@@ -55,10 +56,12 @@ def log_inputs(path: Path | str) -> list[tuple[int, Any]]:
 
 
 def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubSettings,
-                 identities: list[Any] | None = None) -> tuple[VenueHub, dict, dict]:
+                 identities: list[Any] | None = None,
+                 contacts: list[tuple[int, str, str]] | None = None) -> tuple[VenueHub, dict, dict]:
     """(hub, live, refined): per agent, arrays (time_ns, x, y, cov xx, cov xy, cov yy) of the hub's two tracks.
 
-    `identities`, if given, receives the hub's TrackIdentity messages in order."""
+    `identities`, if given, receives the hub's TrackIdentity messages in order; `contacts` the
+    contacts it took, (venue time, agent, other) once per pair."""
     hub = VenueHub(session, settings, clock=time.perf_counter)  # times the identity engine's hops
     kernels = chair_kernels()[0]
     edges = {agent.id: ChairEdge(agent, settings.pose_rate_hz, kernels=kernels) for agent in session.agents
@@ -69,6 +72,8 @@ def run_lockstep(session: Session, inputs: list[tuple[int, Any]], settings: HubS
         for out in hub.on_message(message, arrival_ns):
             if messages.type_name(out) == "Correction":
                 edges[out.agent_id].correct(out)
+                if contacts is not None and out.kind == messages.CorrectionKind.COLLISION and out.agent_id < out.other_agent_id:
+                    contacts.append((out.timestamp_ns, out.agent_id, out.other_agent_id))
             elif messages.type_name(out) == "FieldMap":
                 edges[out.agent_id].field_map(out)
             elif messages.type_name(out) == "TrackIdentity":
@@ -103,16 +108,18 @@ def _row(pose: Any) -> tuple[float, ...]:
 def run_reckon(session: Session, inputs: list[tuple[int, Any]], frame_ns: np.ndarray, corrections: frozenset[str],
                lag_s: float = HubSettings.lag_s) -> tuple[ReckonEstimate, ReckonEstimate]:
     """(live, refined) estimates of every agent of `session` at `frame_ns`; the live one with its covariance."""
-    hub, live, refined = run_lockstep(session, inputs, HubSettings(corrections=corrections, lag_s=lag_s))
+    contacts: list[tuple[int, str, str]] = []
+    hub, live, refined = run_lockstep(session, inputs, HubSettings(corrections=corrections, lag_s=lag_s),
+                                      contacts=contacts)
     applied = sum(sum(view.applied.values()) for view in hub.agents.values())
     ids = [agent.id for agent in session.agents]
     live_rows = np.array([_newest_at(live.get(agent_id), frame_ns) for agent_id in ids])  # (agents, frames, 5)
     refined_xy = [_interpolated(refined.get(agent_id), frame_ns) for agent_id in ids]
     # The refined pose's covariance: the one stated by the refined pose at or before each frame.
     refined_covariance = np.array([_newest_at(refined.get(agent_id), frame_ns) for agent_id in ids])[:, :, 2:]
-    return (ReckonEstimate(live_rows[:, :, 0], live_rows[:, :, 1], applied, live_rows[:, :, 2:]),
+    return (ReckonEstimate(live_rows[:, :, 0], live_rows[:, :, 1], applied, live_rows[:, :, 2:], tuple(contacts)),
             ReckonEstimate(np.array([xy[0] for xy in refined_xy]), np.array([xy[1] for xy in refined_xy]), applied,
-                           refined_covariance))
+                           refined_covariance, tuple(contacts)))
 
 
 def without_magnetometer(inputs: list[tuple[int, Any]]) -> list[tuple[int, Any]]:

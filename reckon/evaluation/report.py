@@ -28,6 +28,9 @@ def to_json(report: EvalReport) -> dict[str, Any]:
              "detected": s.detected, "true_contacts": s.true_contacts}
             for s in report.detection
         ],
+        **({"reckon_contact_pairs": {"threshold_g": s.threshold_g, "precision": _round(s.precision),
+                                     "recall": _round(s.recall), "taken": s.detected, "true_contacts": s.true_contacts,
+                                     "matched": s.matched}} if (s := report.contact_pairs) else {}),
         "problems": report.problems,
     }
 
@@ -55,6 +58,11 @@ def to_table(report: EvalReport) -> str:
         p = "-" if s.precision is None else f"{s.precision:.2f}"
         r = "-" if s.recall is None else f"{s.recall:.2f}"
         lines.append(f"{s.threshold_g:11.0f} {s.detected:8d} {s.true_contacts:5d} {p:>9} {r:>6}")
+    if (s := report.contact_pairs) is not None:
+        p = "-" if s.precision is None else f"{s.precision:.2f}"
+        r = "-" if s.recall is None else f"{s.recall:.2f}"
+        lines.append(f"ours: the hub's contacts (impacts from {s.threshold_g:.0f} g, paired by timing, distance and "
+                     f"pushes; collisions alone): {s.detected} taken, {s.matched} true, precision {p}, recall {r}")
     for problem in report.problems:
         lines.append(f"note: {problem}")
     return "\n".join(lines)

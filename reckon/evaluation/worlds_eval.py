@@ -10,7 +10,8 @@ What the sweep reports:
 - per correction source of ours (and of the paper's method): in how many worlds adding it lowered
   the mean error, raised it, raised it by more than HURT_TOLERANCE, and the median and worst change;
   the magnetometer aid compares our sensors heading with our gyro-only heading, without corrections;
-- the median over worlds of our live pose's NEES per correction set.
+- the median over worlds of our live pose's NEES per correction set;
+- the contacts our hub took (collisions alone), summed over worlds: how many, how many were true.
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ class WorldResult:
     mean_error_m: dict[Key, float]
     nees: dict[Key, float]
     figures: dict[str, float]  # the world's drawn figures (dotted keys)
+    contact_pairs: tuple[int, int, int] | None = None  # ours, collisions alone: (taken, true, true contacts)
 
 
 def run_world(world: int, seed: int, players: int, duration_s: float, workdir: str) -> WorldResult:
@@ -69,7 +71,9 @@ def run_world(world: int, seed: int, players: int, duration_s: float, workdir: s
         errors[key] = row.summary.mean_error_m
         if row.nees is not None:
             nees[key] = row.nees
-    return WorldResult(world, errors, nees, draw_world(world))
+    pairs = report.contact_pairs
+    taken = None if pairs is None else (pairs.detected, pairs.matched, pairs.true_contacts)
+    return WorldResult(world, errors, nees, draw_world(world), taken)
 
 
 def evaluate_worlds(worlds: list[int], seed: int, players: int, duration_s: float, jobs: int | None = None,
@@ -127,9 +131,15 @@ def summarise(results: list[WorldResult]) -> dict[str, Any]:
                         "hurt_over_tolerance": int((change > HURT_TOLERANCE).sum()),
                         "median_change": float(np.median(change)), "worst_change": float(change.max()),
                         "best_change": float(change.min())})
+    counted = [r.contact_pairs for r in results if r.contact_pairs is not None]
+    contact_pairs = ({"taken": sum(c[0] for c in counted), "true": sum(c[1] for c in counted),
+                      "true_contacts": sum(c[2] for c in counted), "worlds": len(counted)} if counted else None)
     return {"worlds": [r.world for r in results], "methods": methods, "sources": sources,
+            **({"contact_pairs": contact_pairs} if contact_pairs else {}),
             "per_world": [{"world": r.world, "mean_error_m": {_label(k): round(v, 4) for k, v in r.mean_error_m.items()},
-                           "nees": {_label(k): round(v, 4) for k, v in r.nees.items()}, "figures": r.figures}
+                           "nees": {_label(k): round(v, 4) for k, v in r.nees.items()}, "figures": r.figures,
+                           **({"contact_pairs": dict(zip(("taken", "true", "true_contacts"), r.contact_pairs))}
+                              if r.contact_pairs else {})}
                           for r in results]}
 
 
@@ -172,6 +182,10 @@ def to_table(summary: dict[str, Any], command: str) -> str:
                      f"{100 * row['worst_change']:+6.1f}% {100 * row['best_change']:+6.1f}%")
     lines.append("change of the mean error when the source is added (negative: it helped); the magnetometer aid "
                  "is ours' sensors heading against ours without the magnetometer; refining: refined against live")
+    if "contact_pairs" in summary:
+        c = summary["contact_pairs"]
+        lines.append(f"ours' contacts (collisions alone), over {c['worlds']} worlds: {c['taken']} taken, "
+                     f"{c['taken'] - c['true']} of them false; {c['true_contacts']} true contacts")
     lines += ["", "per world, mean error (m): " + ", ".join(_label(k) for k in HEADLINE)]
     for row in summary["per_world"]:
         lines.append(f"  world {row['world']:3d}: " + "  ".join(

@@ -55,6 +55,8 @@ def test_eval_json_has_every_heading_and_correction_set(game, capsys):
     assert [d["threshold_g"] for d in report["collision_detection"]] == [float(g) for g in range(4, 13)]
     for d in report["collision_detection"]:
         assert d["precision"] is None or 0.0 <= d["precision"] <= 1.0
+    pairs = report["reckon_contact_pairs"]
+    assert 0 <= pairs["matched"] <= pairs["taken"] and pairs["true_contacts"] == report["collision_detection"][0]["true_contacts"]
 
 
 def test_eval_table_and_plots(game, tmp_path, capsys):

@@ -108,8 +108,10 @@ def test_edges_into_hub_corrected_poses_and_collision_pairs(game, data, free_end
     assert max(errors.values()) < 1.5, errors  # 30 s of play: dead reckoning plus corrections
 
     # the same code in lockstep pairs the same collisions (the bus may reorder, the pairs hold)
-    reference, _, _ = run_lockstep(session, log_inputs(game), HubSettings())
-    assert summary.pairs == reference.counters.pairs >= 1
+    taken: list[tuple[int, str, str]] = []
+    reference, _, _ = run_lockstep(session, log_inputs(game), HubSettings(), contacts=taken)
+    assert summary.pairs == reference.counters.pairs == len(taken) >= 1  # `reckon eval` scores these pairs
+    assert sorted((a, b) for _, a, b in taken) == sorted(tuple(sorted(pair)) for _, pair in set(hub.collisions()))
     contacts = [(c.time_ns, frozenset((c.agent_id, c.other_agent_id))) for c in data.contacts]
     for time_ns, pair in hub.collisions():  # each applied pair was a real contact, found within the window
         assert any(pair == truth_pair and abs(time_ns - truth_ns) < 0.5e9 for truth_ns, truth_pair in contacts)

@@ -44,8 +44,11 @@ def test_the_summary_counts_what_each_source_did(results):
     assert beacon["helped"] == sum(c < 0 for c in changes) and beacon["hurt"] == sum(c > 0 for c in changes)
     assert beacon["hurt_over_tolerance"] == sum(c > HURT_TOLERANCE for c in changes)
     assert beacon["worst_change"] == pytest.approx(max(changes))
+    pairs = summary["contact_pairs"]
+    assert pairs["taken"] == sum(r.contact_pairs[0] for r in results) and 0 <= pairs["true"] <= pairs["taken"]
+    assert pairs["worlds"] == 2 and pairs["true_contacts"] == sum(r.contact_pairs[2] for r in results)
     table = to_table(summary, "reckon eval --worlds 3-4")
-    assert "magnetometer aid" in table and "world   4:" in table
+    assert "magnetometer aid" in table and "world   4:" in table and "of them false" in table
 
 
 def test_the_command_prints_json(capsys):
