@@ -74,7 +74,8 @@ class HubSettings:
     corrections: Collection[str] = CORRECTIONS  # kept as a tuple in CORRECTIONS' order (below)
     impact_g: float = 6.0  # lower than the paper's 8 g: the gate, not the threshold, rejects false pairs
     # both impacts of a contact are one instant on the clocks the hub aligns (hub/clocks.py): the
-    # paper's 0.5 s also pairs two bumps that merely happen close together
+    # paper's 0.5 s also pairs two bumps that merely happen close together. The window is also the
+    # impacts' timing prior until the venue's contacts have shown theirs (pairing.ContactTiming).
     pairing_window_s: float = 0.15
     lateness_s: float = 1.0  # how long a group waits for the other chairs' impacts to arrive
     stale_s: float = 5.0  # an agent silent this long (hub clock) no longer holds the others back
