@@ -12,6 +12,10 @@ def _round(value: float | None) -> float | None:
     return None if value is None else round(value, 4)
 
 
+def _share(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f}"
+
+
 def to_json(report: EvalReport) -> dict[str, Any]:
     return {
         "session": str(report.session_path),
@@ -55,14 +59,12 @@ def to_table(report: EvalReport) -> str:
     lines.append("collision detection (pairs within 0.5 s; 3+ chairs at once skipped), against true contacts")
     lines.append(f"{'threshold g':>11} {'detected':>8} {'true':>5} {'precision':>9} {'recall':>6}")
     for s in report.detection:
-        p = "-" if s.precision is None else f"{s.precision:.2f}"
-        r = "-" if s.recall is None else f"{s.recall:.2f}"
-        lines.append(f"{s.threshold_g:11.0f} {s.detected:8d} {s.true_contacts:5d} {p:>9} {r:>6}")
+        lines.append(f"{s.threshold_g:11.0f} {s.detected:8d} {s.true_contacts:5d} {_share(s.precision):>9} "
+                     f"{_share(s.recall):>6}")
     if (s := report.contact_pairs) is not None:
-        p = "-" if s.precision is None else f"{s.precision:.2f}"
-        r = "-" if s.recall is None else f"{s.recall:.2f}"
         lines.append(f"ours: the hub's contacts (impacts from {s.threshold_g:.0f} g, paired by timing, distance and "
-                     f"pushes; collisions alone): {s.detected} taken, {s.matched} true, precision {p}, recall {r}")
+                     f"pushes; collisions alone): {s.detected} taken, {s.matched} true, "
+                     f"precision {_share(s.precision)}, recall {_share(s.recall)}")
     for problem in report.problems:
         lines.append(f"note: {problem}")
     return "\n".join(lines)
