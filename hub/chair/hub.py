@@ -121,7 +121,8 @@ class ChairHub:
         self.venue = session.venue.name
         self.clocks = ClockOffsets()
         self.beacons = {beacon.id: beacon for beacon in session.venue.beacons}
-        self.beacon_levels = BeaconLevels(session.venue.beacons)
+        self.beacon_levels = BeaconLevels(session.venue.beacons,
+                                          session.venue.court_length_m * session.venue.court_width_m)
         chairs = [agent.id for agent in session.agents if agent.kind is AgentKind.WHEELCHAIR]
         self.field = FieldMap(session.venue, chairs, settings.field_map)
         ring = int(settings.lag_s * settings.pose_rate_hz) + 2
@@ -349,9 +350,9 @@ class ChairHub:
             beacon_id, ended = view.ended.popleft()
             covariance = self.beacon_levels.close(beacon_id, ended.peak_rssi)
             then = view.pose_bridged(ended.peak_ns) if covariance is not None else None
-            if then is not None:
-                point, covariance, _ = self.beacon_levels.fix(beacon_id, then[0], then[1], covariance)
-                out += self._absolute(view, ended.peak_ns, point, covariance, Kind.BEACON, beacon_id, then)
+            fix = self.beacon_levels.fix(beacon_id, then[0], then[1], covariance) if then is not None else None
+            if fix is not None:
+                out += self._absolute(view, ended.peak_ns, fix[0], fix[1], Kind.BEACON, beacon_id, then)
         while view.fixes and view.fixes[0][0] <= view.latest_ns:
             out += self._absolute(view, *view.fixes.popleft())
         return out

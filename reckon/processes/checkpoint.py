@@ -31,7 +31,7 @@ from protocol import keys, messages
 from protocol.errors import InputError
 
 MAGIC = b"reckon-hub-state\n"
-VERSION = 7  # raised whenever the pickled state's fields change: an older snapshot is refused, not half read
+VERSION = 8  # raised whenever the pickled state's fields change: an older snapshot is refused, not half read
 _VERSION = struct.Struct("<I")
 OUTPUT_STREAMS = ("correction", "identity")  # what the hub itself publishes (and records), with its poses
 OUTPUT_TRACKS = ("live", "refined")  # pose/<track> of the hub; pose/edge is an input

@@ -10,8 +10,10 @@ import pytest
 
 from edge.chair.estimator import position_update, start, step, wheel_turn_ratio_prior
 from edge.chair.state import BIAS, GYRO_SCALE, HEADING, X, Y, ChairSample, ChairSettings, Flag
-from hub.chair.corrections import BEACON_BASE_SD_M, BeaconLevels, ContactDistance, contact_update
+from hub.chair.corrections import BEACON_BASE_SD_M, FAR_PRIOR_SD_M, BeaconLevels, ContactDistance, contact_update
 from protocol.session import Beacon
+
+COURT_M2 = 28.0 * 15.0  # an IWBF court
 
 SETTINGS = ChairSettings(wheel_diameter_m=0.6)
 DT_NS = 5_000_000  # 200 Hz
@@ -260,7 +262,7 @@ def test_position_fix_is_gated():
 
 def test_beacon_fixes_follow_the_venue_file_and_what_the_beacon_has_shown():
     beacon = Beacon("goal", 1.575, 7.5, tx_power_dbm=-59.0, height_m=2.9)
-    levels = BeaconLevels((beacon,))
+    levels = BeaconLevels((beacon,), COURT_M2)
     stated = -59.0 - 20 * math.log10(math.hypot(1.0, 2.4))  # the file's level: 1 m from under it, free space
     assert levels.level_dbm("goal") == pytest.approx(stated) and levels.pass_floor_dbm("goal") == pytest.approx(stated - 12)
     near, far = levels.close("goal", -60.0), levels.close("goal", -68.0)
@@ -268,7 +270,7 @@ def test_beacon_fixes_follow_the_venue_file_and_what_the_beacon_has_shown():
     assert levels.close("goal", -85.0) is None  # tens of metres by the venue file, and far below the level
     assert levels.level_dbm("goal") == -68.0 and levels.pass_floor_dbm("goal") == -80.0  # learned from 3 peaks
     # a hall quieter than its file: this beacon's passes peak near -80 dBm; its own close ones count
-    quiet = BeaconLevels((beacon,))
+    quiet = BeaconLevels((beacon,), COURT_M2)
     for peak in (-80.0, -92.0, -79.0, -90.0):
         quiet.close("goal", peak)
     assert quiet.level_dbm("goal") == -80.0 and quiet.pass_floor_dbm("goal") == -92.0
@@ -279,7 +281,7 @@ def test_a_beacon_learns_where_its_close_passes_are_and_how_many_are_far():
     """Chairs that peak 2.5 m in front of the goal (+x), within 0.8 m, and candidates of which 40 % are far
     passes 6-16 m out: the close kind's offset and share are learned, a far candidate is sent as a far fix."""
     beacon = Beacon("goal", 1.575, 7.5, tx_power_dbm=-59.0, height_m=2.9)
-    levels = BeaconLevels((beacon,))
+    levels = BeaconLevels((beacon,), COURT_M2)
     rng = np.random.default_rng(7)
     pose_cov, stated = np.eye(2) * 0.1, np.eye(2) * 4.0
     kinds = []
@@ -289,13 +291,17 @@ def test_a_beacon_learns_where_its_close_passes_are_and_how_many_are_far():
         else:
             from_beacon = np.array([rng.uniform(6.0, 16.0), rng.uniform(-7.0, 7.0)])
         pose = np.array([beacon.x_m, beacon.y_m]) + from_beacon + rng.normal(0.0, math.sqrt(0.1), 2)
-        kinds.append(levels.fix("goal", pose, pose_cov, stated)[2])
+        fix = levels.fix("goal", pose, pose_cov, stated)
+        kinds.append(None if fix is None else fix[2])
     record = levels.levels["goal"]
     assert record.close.offset_m() == pytest.approx([2.5, 0.0], abs=0.4)  # in front of the goal, not under it
     assert 0.45 < levels.close_share("goal") < 0.75
-    assert record.close_fixes + record.far_fixes == 300 and 0.45 < np.mean(kinds) < 0.75
+    assert record.close_fixes + record.far_fixes + record.stray == 300
+    assert record.stray < 20  # only the far box's corners, 16 m out, look like strays
+    assert 0.45 < np.mean([kind for kind in kinds if kind is not None]) < 0.75
     line = levels.describe("goal")
-    assert line.startswith(f"{record.close_fixes} close-pass fixes, {record.far_fixes} far") and "(+2." in line
+    assert line.startswith(f"{record.close_fixes} close-pass fixes, {record.far_fixes} far, {record.stray} stray")
+    assert "(+2." in line
     near_point, near_cov, close = levels.fix("goal", np.array([beacon.x_m + 2.6, beacon.y_m]), pose_cov, stated)
     assert close and np.hypot(*(near_point - [beacon.x_m + 2.5, beacon.y_m])) < 0.4
     assert near_cov[0, 0] == pytest.approx(4.0, rel=0.2)  # the venue file's sigma: the learned spread is below it
@@ -305,8 +311,30 @@ def test_a_beacon_learns_where_its_close_passes_are_and_how_many_are_far():
     for _ in range(200):
         levels.fix("goal", np.array([beacon.x_m + 2.5, beacon.y_m]), np.eye(2) * 50.0, stated)
     assert record.close.variance_m2() > 0.0 and record.far.variance_m2() > 0.0
-    point, cov, _ = levels.fix("goal", np.array([beacon.x_m + 12.0, beacon.y_m]), np.eye(2) * 0.1, stated)
-    assert np.all(np.isfinite(point)) and np.all(np.linalg.eigvalsh(cov) > 0.0)
+    for out_m in (2.5, 12.0):  # 12 m: where neither kind has been any more, a stray (None)
+        fix = levels.fix("goal", np.array([beacon.x_m + out_m, beacon.y_m]), np.eye(2) * 0.1, stated)
+        assert (fix is None) == (out_m == 12.0)
+        assert fix is None or (np.all(np.isfinite(fix[0])) and np.all(np.linalg.eigvalsh(fix[1]) > 0.0))
+
+
+def test_a_candidate_whose_pose_puts_it_across_the_court_is_no_fix():
+    """A chair parked 20 m from the goal, its pose good to half a metre, hears the beacon peak (the strongest
+    of many fades): neither a close nor a far pass, so no fix at all; one 8 m out whose pose states metres
+    still gets a far fix, weaker by the chance that it was a stray."""
+    beacon = Beacon("goal", 1.575, 7.5, tx_power_dbm=-59.0, height_m=2.9)
+    levels = BeaconLevels((beacon,), COURT_M2)
+    at, stated = np.array([beacon.x_m, beacon.y_m]), np.eye(2) * 9.0
+    assert levels.fix("goal", at + [20.0, 0.0], np.eye(2) * 0.25, stated) is None
+    assert levels.levels["goal"].stray == 1 and levels.levels["goal"].far_fixes == 0
+    point, covariance, close = levels.fix("goal", at + [8.0, 0.0], np.eye(2) * 4.0, stated)
+    assert not close and np.hypot(*(point - at)) < 3.0
+    assert covariance[0, 0] > FAR_PRIOR_SD_M**2  # the far kind's 5 m, and more: it may have been a stray
+    # a stray teaches neither kind: the far kind's place is where genuine far passes were
+    for _ in range(50):
+        assert levels.fix("goal", at + [24.0, 5.0], np.eye(2) * 0.25, stated) is None
+    assert np.hypot(*levels.levels["goal"].far.offset_m()) < 4.0
+    with pytest.raises(ValueError, match="court area 0"):
+        BeaconLevels((beacon,), 0.0)
 
 
 def test_the_contact_distance_is_learned_from_the_contacts_taken():
