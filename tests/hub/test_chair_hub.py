@@ -161,6 +161,23 @@ def test_once_contacts_have_shown_how_close_in_time_their_impacts_come_a_late_on
     assert hub.counters.pairs == 40 and hub.counters.not_simultaneous == 1
 
 
+@pytest.mark.parametrize("apart_m, weight", [(1.2, 1.0), (3.0, 2.1 / 0.59**0.5 / 1.5)])
+def test_a_contact_far_from_what_the_poses_say_pulls_each_chair_less(apart_m, weight):
+    """Inside the gate but 2.1 m from the contact distance (0.9 m) with 0.5 m poses: each side's
+    measurement is 2.7 SDs from its chair's pose, so its covariance grows by 2.7 / 1.5 (Huber), and a
+    chair whose partner is metres off while stating less is not dragged the whole way."""
+    hub = ChairHub(venue(2), HubSettings(corrections=frozenset({"collision"})))
+    positions = {"c0": (10.0, 5.0), "c1": (10.0 + apart_m, 5.0)}
+    feed_poses(hub, positions, 0.0, 2.0)
+    send(hub, impact("c0", int(2.0 * S)))
+    send(hub, impact("c1", int(2.0 * S)))
+    out = corrections(feed_poses(hub, positions, 2.0, 4.0))
+    assert hub.counters.pairs == 1 and len(out) == 2
+    for correction in out:
+        assert abs(correction.dx_m) == pytest.approx(apart_m - 0.9)  # the measurement is the contact's, whole
+        assert correction.covariance[0] == pytest.approx((0.25 + 0.09) * weight)  # the other's pose + the contact's
+
+
 def test_a_lone_impact_and_a_far_pair_change_nothing():
     hub = ChairHub(venue(2), HubSettings(corrections=frozenset({"collision"})))
     positions = {"c0": (2.0, 2.0), "c1": (25.0, 12.0)}  # 24 m apart with 0.5 m uncertainty: no contact
