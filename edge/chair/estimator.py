@@ -76,12 +76,16 @@ def step(settings: ChairSettings, state: ChairState, sample: ChairSample) -> Cha
     seat = math.isfinite(sample.yaw_rate_dps)  # a bridge sample has the wheels only
     flags = Flag.GAP if dt > settings.gap_s or not seat or not math.isfinite(state.yaw_rate_dps) else Flag.NONE
     accel_norm = math.sqrt(sum(a * a for a in sample.accel_g)) if seat else state.accel_mean_g
-    alpha = min(dt / settings.accel_mean_time_s, 1.0)
-    accel_mean = state.accel_mean_g + alpha * (accel_norm - state.accel_mean_g)
     left_dps, right_dps = sample.left_rotation_deg / dt, sample.right_rotation_deg / dt
-    still_now = (abs(left_dps) < settings.still_wheel_dps and abs(right_dps) < settings.still_wheel_dps
-                 and abs(sample.yaw_rate_dps) < settings.still_gyro_dps
-                 and abs(accel_norm - accel_mean) < settings.still_accel_g)
+    quiet = (abs(left_dps) < settings.still_wheel_dps and abs(right_dps) < settings.still_wheel_dps
+             and abs(sample.yaw_rate_dps) < settings.still_gyro_dps)
+    # |a| steady against its own mean over this quiet spell, not a slow mean carried over from play:
+    # at rest |a| reads its scale and bias (0.97 g, say), in play vibration and pushes lift the mean
+    # (1.02 g), so a slow mean let no brief stop count, and an edge that started mid-play went a
+    # minute on the bias prior alone (1 deg/s: 30-45 deg of heading)
+    alpha = dt / (state.still_s + dt) if quiet else 1.0
+    accel_mean = state.accel_mean_g + alpha * (accel_norm - state.accel_mean_g)
+    still_now = quiet and abs(accel_norm - accel_mean) < settings.still_accel_g
     still_s = state.still_s + dt if still_now else 0.0
     still = still_s >= settings.still_time_s
 

@@ -162,11 +162,12 @@ def _step(s, st, mean, cov, fit, work, dt, sample, time_ns):
                                      sample[V_ACCEL + 2] * sample[V_ACCEL + 2]))
     else:
         accel_norm = st[ACCEL_MEAN]
-    alpha = min(dt / s[S_ACCEL_MEAN_TIME], 1.0)
-    accel_mean = st[ACCEL_MEAN] + alpha * (accel_norm - st[ACCEL_MEAN])
     left_dps, right_dps = sample[V_LEFT] / dt, sample[V_RIGHT] / dt
-    still_now = (abs(left_dps) < s[S_STILL_WHEEL] and abs(right_dps) < s[S_STILL_WHEEL]
-                 and abs(yaw_rate) < s[S_STILL_GYRO] and abs(accel_norm - accel_mean) < s[S_STILL_ACCEL])
+    quiet = (abs(left_dps) < s[S_STILL_WHEEL] and abs(right_dps) < s[S_STILL_WHEEL]
+             and abs(yaw_rate) < s[S_STILL_GYRO])
+    alpha = dt / (st[STILL_S] + dt) if quiet else 1.0  # |a|'s mean over this quiet spell (the reference says why)
+    accel_mean = st[ACCEL_MEAN] + alpha * (accel_norm - st[ACCEL_MEAN])
+    still_now = quiet and abs(accel_norm - accel_mean) < s[S_STILL_ACCEL]
     still_s = st[STILL_S] + dt if still_now else 0.0
     still = still_s >= s[S_STILL_TIME]
 

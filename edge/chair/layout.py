@@ -68,13 +68,13 @@ AXLE_DONE = AXLE_SEEN + 1  # 0 or 1
 STATE_SIZE = AXLE_DONE + 1
 
 # --- settings vector -----------------------------------------------------------------------
-(S_GAP, S_ACCEL_MEAN_TIME, S_STILL_WHEEL, S_STILL_GYRO, S_STILL_ACCEL, S_STILL_TIME, S_HALF_CIRCUMFERENCE,
+(S_GAP, S_STILL_WHEEL, S_STILL_GYRO, S_STILL_ACCEL, S_STILL_TIME, S_HALF_CIRCUMFERENCE,
  S_WHEEL_BIAS_TIME, S_WHEEL_TURN_SD, S_GYRO_NOISE_VAR, S_WHEEL_RATE_LIMIT, S_WHEEL_TURN_MEMORY, S_IMPACT_G,
  S_ALONG_SD, S_ACROSS_SD, S_SHOVE_VAR, S_BIAS_WALK_VAR, S_SCALE_WALK_VAR, S_STILL_RATE_VAR, S_MAG_PERIOD,
  S_MAG_FIT_FORGET, S_MAG_MIN_SPREAD_SQ, S_MAG_MIN_POINTS, S_MAG_HEADING_VAR, S_MAG_GATE_CHI2,
  S_MAG_RECOVER_REJECTIONS, S_MAG_FLOOR_VAR, S_MAG_LEVEL_WEIGHT, S_MAG_FORGET, S_MAG_MIN_STEP, S_MAG_CORRELATION_PRIOR,
  S_MAG_CORRELATION_MAX, S_MAG_CORRELATION_MIN, S_MAG_TRUST_VAR, S_MAG_TURN_S, S_MAG_TURN_VAR, S_WHEEL_AXIS_SD,
- S_WHEEL_AXIS_BIAS, S_AXLE_TURN, S_AXLE_WINDOW, S_AXLE_COS, S_AXLE_NOISE, S_AXLE_GATE) = range(43)
+ S_WHEEL_AXIS_BIAS, S_AXLE_TURN, S_AXLE_WINDOW, S_AXLE_COS, S_AXLE_NOISE, S_AXLE_GATE) = range(42)
 SETTINGS_SIZE = S_AXLE_GATE + 1
 
 # --- sample rows ---------------------------------------------------------------------------
@@ -98,7 +98,6 @@ def pack_settings(settings: ChairSettings) -> np.ndarray:
     s = settings
     vector = np.zeros(SETTINGS_SIZE)
     vector[S_GAP] = s.gap_s
-    vector[S_ACCEL_MEAN_TIME] = s.accel_mean_time_s
     vector[S_STILL_WHEEL] = s.still_wheel_dps
     vector[S_STILL_GYRO] = s.still_gyro_dps
     vector[S_STILL_ACCEL] = s.still_accel_g

@@ -47,11 +47,10 @@ class ChairSettings:
     impact_shove_sd_m: float = 0.15  # a horizontal impact's shove (worlds 1-10: 0.3 made the filter 3x too doubtful)
     still_wheel_dps: float = 3.0  # both wheels slower than this (bias up to ~1.5 deg/s + noise)
     still_gyro_dps: float = 2.0  # seat yaw rate below this, before bias correction (4 x the bias SD)
-    still_accel_g: float = 0.05  # |a| within this of its slow mean
+    still_accel_g: float = 0.05  # |a| within this of its mean over the quiet spell so far
     still_time_s: float = 0.5  # conditions held this long (a pivot reversing slowly passes in less)
     still_rate_sd_dps: float = 0.3  # how still "still" is (fidgeting), per update
     wheel_bias_time_s: float = 2.0  # time constant of the wheel-bias average while still
-    accel_mean_time_s: float = 1.0  # time constant of the slow |a| mean
     gap_s: float = 0.1
     track_m: float = 0.82  # wheel contact track, only a prior for the wheel-turn ratio
     camber_deg: float = 17.0  # likewise
@@ -159,7 +158,7 @@ class ChairState:
     left_bias_dps: float
     right_bias_dps: float
     still_s: float
-    accel_mean_g: float
+    accel_mean_g: float  # |a|'s mean over the current quiet spell (the last |a| outside one)
     gravity: tuple[float, float, float]  # unit vector, chair frame, measured while still
     flags: Flag
     in_impact: bool  # the last sample was above impact_g (an impact spans several samples)
