@@ -48,7 +48,7 @@ class ChairSettings:
     still_wheel_dps: float = 3.0  # both wheels slower than this (bias up to ~1.5 deg/s + noise)
     still_gyro_dps: float = 2.0  # seat yaw rate below this, before bias correction (4 x the bias SD)
     still_accel_g: float = 0.05  # |a| within this of its mean over the quiet spell so far
-    still_time_s: float = 0.5  # conditions held this long (a pivot reversing slowly passes in less)
+    still_time_s: float = 0.3  # conditions held this long (worlds 1-10 + 31-50: 0.3 s against 0.5; a pivot reversing passes in ms)
     still_rate_sd_dps: float = 0.3  # how still "still" is (fidgeting), per update
     wheel_bias_time_s: float = 2.0  # time constant of the wheel-bias average while still
     gap_s: float = 0.1
