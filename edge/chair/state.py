@@ -36,7 +36,9 @@ class Flag(enum.IntFlag):
 class ChairSettings:
     wheel_diameter_m: float = 0.61
     gyro_noise_dps_per_sqrt_hz: float = 0.01  # MPU-9250 rate noise density
-    gyro_bias_walk_dps_per_sqrt_s: float = 0.002  # MEMS in-run instability
+    # the bias's random walk: MEMS in-run instability (0.0005-0.005) and, larger, the warm-up after power-on
+    # (0-0.5 deg/s over 100-600 s, docs/simulator.md): b sqrt(T) / tau over the 30-60 s between stops, 0.005-0.02
+    gyro_bias_walk_dps_per_sqrt_s: float = 0.01
     initial_gyro_bias_sd_dps: float = 1.0  # prior before the first still period
     gyro_scale_sd: float = 0.02  # prior of the seat gyro's scale error (MPU-9250: +-3 %)
     wheel_scale_sd: float = 0.01  # prior of effective / measured wheel diameter

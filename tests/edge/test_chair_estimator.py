@@ -90,6 +90,23 @@ def test_a_brief_stop_in_play_learns_the_gyro_bias():
     assert math.degrees(math.sqrt(state.cov[BIAS, BIAS])) < 0.1  # the prior was 1 deg/s
 
 
+def test_a_gyro_warming_up_in_play_stays_inside_the_stated_heading_uncertainty():
+    """After power-on a MEMS gyro's bias moves as it warms (0-0.5 deg/s over 100-600 s): here 0.15
+    deg/s over a minute of play after a stop that learned it. Its heading error (4.5 deg) must stay
+    within two stated SDs: the bias walk covers the warm-up, not only the in-run instability."""
+    stop = [sample(i, yaw_dps=0.2) for i in range(0, 401)]
+    per_step = roll_deg(1.0) / 200
+    play = [sample(i, yaw_dps=0.2 + 0.15 * (i - 401) / 12000, left_deg=per_step, right_deg=per_step)
+            for i in range(401, 12401)]
+    samples = stop + play
+    state = start(SETTINGS, samples[0], 0.0, 0.0, 0.0, heading_sd_rad=math.radians(0.1))  # a stand's heading
+    for s in samples[1:]:
+        state = step(SETTINGS, state, s)
+    error = math.degrees(state.mean[HEADING])  # the chair rolled straight: the true heading stayed 0
+    assert error == pytest.approx(0.5 * 0.15 * 60.0, abs=0.5)  # nothing in play tells the drift
+    assert abs(error) < 2.0 * math.degrees(math.sqrt(state.cov[HEADING, HEADING]))
+
+
 def test_a_chair_jostled_with_its_wheels_quiet_is_not_still():
     state, flags = stop_after_play(2.0, [0.9, 1.1])
     assert not flags & Flag.STILL
