@@ -28,8 +28,8 @@ def sample(i: int, yaw_dps: float = 0.0, left_deg: float = 0.0, right_deg: float
     return ChairSample(i * DT_NS, yaw_dps, left_deg, right_deg, accel, mag)
 
 
-def run(samples, x=0.0, y=0.0, heading=0.0):
-    state = start(SETTINGS, samples[0], x, y, heading)
+def run(samples, x=0.0, y=0.0, heading=0.0, **start_options):
+    state = start(SETTINGS, samples[0], x, y, heading, **start_options)
     for s in samples[1:]:
         state = step(SETTINGS, state, s)
     return state
@@ -98,10 +98,7 @@ def test_a_gyro_warming_up_in_play_stays_inside_the_stated_heading_uncertainty()
     per_step = roll_deg(1.0) / 200
     play = [sample(i, yaw_dps=0.2 + 0.15 * (i - 401) / 12000, left_deg=per_step, right_deg=per_step)
             for i in range(401, 12401)]
-    samples = stop + play
-    state = start(SETTINGS, samples[0], 0.0, 0.0, 0.0, heading_sd_rad=math.radians(0.1))  # a stand's heading
-    for s in samples[1:]:
-        state = step(SETTINGS, state, s)
+    state = run(stop + play, heading_sd_rad=math.radians(0.1))  # a stand's heading
     error = math.degrees(state.mean[HEADING])  # the chair rolled straight: the true heading stayed 0
     assert error == pytest.approx(0.5 * 0.15 * 60.0, abs=0.5)  # nothing in play tells the drift
     assert abs(error) < 2.0 * math.degrees(math.sqrt(state.cov[HEADING, HEADING]))
