@@ -10,8 +10,8 @@ import math
 
 from numba import njit
 
-from edge.chair.state import (BIAS, DEG, GYRO_SCALE, HEADING, M_DIFF, M_LAST, M_RADIAL, M_RADIUS, M_STEP, M_WEIGHT,
-                              MAG_STATS, NORTH, N, X, Y)
+from edge.chair.state import (BIAS, DEG, GYRO_SCALE, HEADING, M_CHECKS, M_DIFF, M_EXCESS, M_LAST, M_RADIAL, M_RADIUS,
+                              M_STEP, M_WEIGHT, MAG_STATS, NORTH, N, X, Y)
 from edge.chair.kernel_math import fma, pow2, sum3, wrap
 from edge.chair.layout import (FIELD_COUNT, FIELD_OFFSET, FIELD_TIME_HIGH, FIELD_TIME_LOW, FIELD_VAR, FIELD_X,
                                FIELD_Y, GRAVITY, LAPACK_EPS, MAG_ANCHOR, MAG_DUE, MAG_INNOVATION, MAG_READY,
@@ -59,7 +59,8 @@ def magnetometer(s, st, mean, cov, fit, work, sample, time_ns):
         _reset_turn(st, raw_angle)
     angle = raw_angle  # north - heading: the hub's map's offset out where it knows this place better
     mapped = _trusted(s, st[MAP_VAR]) if st[MAP_VAR] > 0.0 else math.inf
-    if mapped < variance:
+    use_map = mapped < variance
+    if use_map:
         angle = wrap(raw_angle - st[MAP_OFFSET])
         variance = mapped
     if st[MAG_READY] == 0.0 or st[MAG_REJECTIONS] >= s[S_MAG_RECOVER_REJECTIONS]:
@@ -81,10 +82,15 @@ def magnetometer(s, st, mean, cov, fit, work, sample, time_ns):
     gain, row = work[W_GAIN], work[W_ROW]
     for j in range(N):
         row[j] = cov[NORTH, j] - cov[HEADING, j]  # h P
-    total = ((row[NORTH] - row[HEADING]) + variance
-             + _across(spread_xx, spread_xy, spread_yy, -math.sin(angle), math.cos(angle)))
+    predicted = row[NORTH] - row[HEADING]
+    across = _across(spread_xx, spread_xy, spread_yy, -math.sin(angle), math.cos(angle))
+    total = predicted + variance + across
     st[MAG_INNOVATION] = innovation / DEG
     st[MAG_SINCE_UPDATE] = 0.0
+    if not use_map:  # the reference's `_check_disturbance`
+        forget = s[S_MAG_FORGET]
+        stats[M_EXCESS] = forget * stats[M_EXCESS] + (innovation * innovation - predicted - across)
+        stats[M_CHECKS] = forget * stats[M_CHECKS] + 1.0
     if innovation * innovation / total > s[S_MAG_GATE_CHI2]:
         st[MAG_REJECTIONS] += 1.0
         return flags | MAG_REJECTED
@@ -174,7 +180,10 @@ def _trusted(s, variance):
 def _mag_disturbance(s, stats):
     """The reference's `mag_disturbance`: (heading variance, correlation length)."""
     prior_weight, weight = s[S_MAG_LEVEL_WEIGHT], stats[M_WEIGHT]
-    variance = _trusted(s, (stats[M_RADIAL] + prior_weight * s[S_MAG_HEADING_VAR]) / (weight + prior_weight))
+    variance = (stats[M_RADIAL] + prior_weight * s[S_MAG_HEADING_VAR]) / (weight + prior_weight)
+    if stats[M_CHECKS] > 0.0:
+        variance = max(variance, (stats[M_EXCESS] + prior_weight * variance) / (stats[M_CHECKS] + prior_weight))
+    variance = _trusted(s, variance)
     correlation = s[S_MAG_CORRELATION_PRIOR]
     if weight > 1.0 and stats[M_RADIAL] > 0.0:
         ratio = 0.5 * (stats[M_DIFF] / stats[M_RADIAL])

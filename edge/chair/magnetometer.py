@@ -33,8 +33,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from edge.chair.state import (BIAS, DEG, GYRO_SCALE, HEADING, M_DIFF, M_LAST, M_RADIAL, M_RADIUS, M_STEP, M_WEIGHT,
-                              N, NORTH, X, Y, ChairSample, ChairSettings, Flag, MagAid, wrap)
+from edge.chair.state import (BIAS, DEG, GYRO_SCALE, HEADING, M_CHECKS, M_DIFF, M_EXCESS, M_LAST, M_RADIAL, M_RADIUS,
+                              M_STEP, M_WEIGHT, N, NORTH, X, Y, ChairSample, ChairSettings, Flag, MagAid, wrap)
 
 
 def magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, gravity: tuple[float, float, float],
@@ -77,7 +77,8 @@ def magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, grav
     # (the turn above is a difference over metres, which a map's errors from cell to cell would only add to)
     angle = raw_angle
     mapped = _trusted(settings, mag.map_var_rad2) if mag.map_var_rad2 > 0.0 else math.inf
-    if mapped < variance:
+    use_map = mapped < variance
+    if use_map:
         angle, variance = wrap(raw_angle - mag.map_offset_rad), mapped
     if not mag.ready or mag.rejections >= settings.mag_recover_rejections:
         # (re)learn north = angle + heading: it inherits the heading's error and all its correlations
@@ -92,8 +93,11 @@ def magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, grav
     innovation = wrap(angle - (mean[NORTH] - mean[HEADING]))
     h = np.zeros(N)
     h[NORTH], h[HEADING] = 1.0, -1.0
-    total = float(h @ cov @ h) + variance + _across(centre_spread, -math.sin(angle), math.cos(angle))
+    predicted, across = float(h @ cov @ h), _across(centre_spread, -math.sin(angle), math.cos(angle))
+    total = predicted + variance + across
     mag = replace(mag, innovation_deg=innovation / DEG, since_update_m=0.0)
+    if not use_map:  # the hall's own readings checked against the heading (the map's are the hub's to check)
+        mag = replace(mag, stats=_check_disturbance(settings, mag.stats, innovation * innovation - predicted - across))
     if innovation * innovation / total > settings.mag_gate_chi2:
         return replace(mag, rejections=mag.rejections + 1), mean, cov, flags | Flag.MAG_REJECTED
     gain = cov @ h / total
@@ -164,6 +168,17 @@ def _learn_disturbance(settings: ChairSettings, stats: np.ndarray, radius: float
     return out
 
 
+def _check_disturbance(settings: ChairSettings, stats: np.ndarray, excess: float) -> np.ndarray:
+    """The statistics after one more north - heading reading whose squared innovation is `excess`
+    beyond what the filter's heading and the fit's centre explain: what the reading's own error
+    was, whatever the strength's spread said (`mag_disturbance` takes the larger)."""
+    out = stats.copy()
+    forget = 1.0 - 1.0 / settings.mag_level_memory
+    out[M_EXCESS] = forget * out[M_EXCESS] + excess
+    out[M_CHECKS] = forget * out[M_CHECKS] + 1.0
+    return out
+
+
 def _trusted(settings: ChairSettings, variance: float) -> float:
     """A disturbance's variance as the aid uses it: floored, and beyond `mag_trust_sd_deg` grown with
     its square (chairs keep to a few places, so its errors do not average out as independent
@@ -173,10 +188,18 @@ def _trusted(settings: ChairSettings, variance: float) -> float:
 
 
 def mag_disturbance(settings: ChairSettings, stats: np.ndarray) -> tuple[float, float]:
-    """(heading variance rad^2, correlation length m) of the hall's field: learned, blended with the priors."""
+    """(heading variance rad^2, correlation length m) of the hall's field: learned, blended with the priors.
+
+    The strength's spread reads a disturbance without knowing the heading, but under-reads one
+    smooth over the court (part of it goes into the circle fit where chairs cross one half one
+    way, the other half the other): the readings' own errors against the heading, once there are
+    some, set the variance where they are larger."""
     prior_weight, weight = settings.mag_level_weight, stats[M_WEIGHT]
     prior_var = (settings.mag_heading_sd_deg * DEG) ** 2
-    variance = _trusted(settings, (stats[M_RADIAL] + prior_weight * prior_var) / (weight + prior_weight))
+    variance = (stats[M_RADIAL] + prior_weight * prior_var) / (weight + prior_weight)
+    if stats[M_CHECKS] > 0.0:
+        variance = max(variance, (stats[M_EXCESS] + prior_weight * variance) / (stats[M_CHECKS] + prior_weight))
+    variance = _trusted(settings, variance)
     correlation = settings.mag_correlation_prior_m
     if weight > 1.0 and stats[M_RADIAL] > 0.0:
         ratio = 0.5 * (stats[M_DIFF] / stats[M_RADIAL])  # 1 - exp(-step / L), exponential correlation

@@ -15,9 +15,10 @@ X, Y, HEADING, BIAS, SCALE, GYRO_SCALE, NORTH = range(7)
 N = 7
 # The magnetometer aid's learned statistics (MagAid.stats), running sums with forgetting: the
 # readings' weight; their squared relative strength residuals; successive residuals' squared
-# differences and the travel between them; the field strength; and the last residual.
-M_WEIGHT, M_RADIAL, M_DIFF, M_STEP, M_RADIUS, M_LAST = range(6)
-MAG_STATS = 6
+# differences and the travel between them; the field strength; the last residual; and the north - heading
+# readings' squared innovations beyond what the filter's heading explains, and their weight.
+M_WEIGHT, M_RADIAL, M_DIFF, M_STEP, M_RADIUS, M_LAST, M_EXCESS, M_CHECKS = range(8)
+MAG_STATS = 8
 
 
 class Flag(enum.IntFlag):
