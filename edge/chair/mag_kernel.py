@@ -87,7 +87,7 @@ def magnetometer(s, st, mean, cov, fit, work, sample, time_ns):
     total = predicted + variance + across
     st[MAG_INNOVATION] = innovation / DEG
     st[MAG_SINCE_UPDATE] = 0.0
-    if not use_map:  # the reference's `_check_disturbance`
+    if not use_map and predicted < variance:  # the reference's `_check_disturbance`
         forget = s[S_MAG_FORGET]
         stats[M_EXCESS] = forget * stats[M_EXCESS] + (innovation * innovation - predicted - across)
         stats[M_CHECKS] = forget * stats[M_CHECKS] + 1.0

@@ -8,6 +8,10 @@ space, about isotropic, and nobody knows it in advance (0-25 deg RMS, correlated
 - its size is learned from the spread of the field's strength around the circle (a disturbance
   that turns the field by a degrees changes its strength by as much), its correlation length
   from how fast successive readings' strengths differ over the travel between them;
+- the north - heading readings are checked against the heading where it is known better than
+  they claim to be: their squared errors beyond what the heading's own uncertainty explains set
+  their variance where that is larger than the spread says (the spread can under-read a
+  disturbance smooth over the court: about 8 of 21 deg in one such hall, docs/reckon-estimator.md);
 - the turn the field saw over `mag_turn_s` measures the gyro's bias and scale: over little
   travel the disturbance hardly changes, so its change, 2 var (1 - exp(-d / L)), is the
   noise; a pivot in place measures the scale exactly, however disturbed the hall;
@@ -96,7 +100,9 @@ def magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, grav
     predicted, across = float(h @ cov @ h), _across(centre_spread, -math.sin(angle), math.cos(angle))
     total = predicted + variance + across
     mag = replace(mag, innovation_deg=innovation / DEG, since_update_m=0.0)
-    if not use_map:  # the hall's own readings checked against the heading (the map's are the hub's to check)
+    # the hall's own readings checked against a heading known better than they claim to be (an uncertain
+    # heading's innovation says little about the reading; the map's readings are the hub's to check)
+    if not use_map and predicted < variance:
         mag = replace(mag, stats=_check_disturbance(settings, mag.stats, innovation * innovation - predicted - across))
     if innovation * innovation / total > settings.mag_gate_chi2:
         return replace(mag, rejections=mag.rejections + 1), mean, cov, flags | Flag.MAG_REJECTED
@@ -190,10 +196,9 @@ def _trusted(settings: ChairSettings, variance: float) -> float:
 def mag_disturbance(settings: ChairSettings, stats: np.ndarray) -> tuple[float, float]:
     """(heading variance rad^2, correlation length m) of the hall's field: learned, blended with the priors.
 
-    The strength's spread reads a disturbance without knowing the heading, but under-reads one
-    smooth over the court (part of it goes into the circle fit where chairs cross one half one
-    way, the other half the other): the readings' own errors against the heading, once there are
-    some, set the variance where they are larger."""
+    The strength's spread reads a disturbance without knowing the heading, but can under-read one
+    smooth over the court: the readings' own errors against the heading, once there are some, set
+    the variance where they are larger."""
     prior_weight, weight = settings.mag_level_weight, stats[M_WEIGHT]
     prior_var = (settings.mag_heading_sd_deg * DEG) ** 2
     variance = (stats[M_RADIAL] + prior_weight * prior_var) / (weight + prior_weight)
