@@ -36,8 +36,8 @@ from dataclasses import replace
 import numpy as np
 
 from edge.chair.magnetometer import magnetometer
-from edge.chair.state import (BIAS, DEG, GYRO_SCALE, HEADING, MAG_STATS, N, SCALE, X, Y, AxleScale, ChairSample,
-                              ChairSettings, ChairState, Flag, MagAid)
+from edge.chair.state import (BIAS, DEG, GYRO_SCALE, HEADING, MAG_FIT_SIZE, MAG_STATS, N, SCALE, X, Y, AxleScale,
+                              ChairSample, ChairSettings, ChairState, Flag, MagAid)
 
 
 def wheel_turn_ratio_prior(settings: ChairSettings) -> float:
@@ -65,7 +65,7 @@ def start(settings: ChairSettings, sample: ChairSample, x_m: float, y_m: float, 
                       sample.yaw_rate_dps, 0.0, 0.0, 0.0, norm, tuple(a / norm for a in sample.accel_g), Flag.NONE,
                       False, 0.0, wheel_turn_ratio_prior(settings) * prior_weight, prior_weight,
                       wheel_axis_ratio_prior(settings) * prior_weight, prior_weight,
-                      MagAid(np.zeros((4, 4)), 0.0, False, 0, 0.0, np.zeros(MAG_STATS), 0.0, 0.0, math.nan, 0.0, 0.0,
+                      MagAid(np.zeros(MAG_FIT_SIZE), 0.0, False, 0, 0.0, np.zeros(MAG_STATS), 0.0, 0.0, math.nan, 0.0, 0.0,
                              0.0), AxleScale(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False))
 
 

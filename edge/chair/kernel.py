@@ -75,7 +75,7 @@ def run_batch(settings: np.ndarray, state: np.ndarray, times: np.ndarray,
     flags = np.zeros(times.shape[0], dtype=np.int64)
     mean = out[MEAN:MEAN + N]  # views: the loop updates `out` in place
     cov = out[COV:COV + N * N].reshape((N, N))
-    fit = out[MAG_FIT:MAG_FIT + 16].reshape((4, 4))
+    fit = out[MAG_FIT:MAG_FIT + MAG_FIT_SIZE]
     work = np.empty((W_ROWS, N))
     time_ns = (np.int64(out[TIME_HIGH]) << 32) + np.int64(out[TIME_LOW])
     for i in range(times.shape[0]):

@@ -17,7 +17,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from edge.chair.estimator import axle_scale_noise
-from edge.chair.state import DEG, MAG_STATS, N, AxleScale, ChairSample, ChairSettings, ChairState, Flag, MagAid
+from edge.chair.state import DEG, MAG_FIT_SIZE, MAG_STATS, N, AxleScale, ChairSample, ChairSettings, ChairState, Flag, MagAid
 
 # --- state vector --------------------------------------------------------------------------
 TIME_HIGH = 0  # time_ns >> 32 and time_ns & 0xFFFFFFFF: each exact in a float64, the whole is not
@@ -37,8 +37,8 @@ TURN_XY = TRAVEL + 1
 TURN_XX = TURN_XY + 1
 AXIS_XY = TURN_XX + 1
 AXIS_XX = AXIS_XY + 1
-MAG_FIT = AXIS_XX + 1  # 4 x 4 moments, row-major
-MAG_DUE = MAG_FIT + 16
+MAG_FIT = AXIS_XX + 1  # the hard-iron fit's 7 running sums
+MAG_DUE = MAG_FIT + MAG_FIT_SIZE
 MAG_READY = MAG_DUE + 1  # 0 or 1
 MAG_REJECTIONS = MAG_READY + 1
 MAG_INNOVATION = MAG_REJECTIONS + 1
@@ -88,9 +88,8 @@ AXLE_SCALE_USED, AXLE_SCALE_REJECTED = int(Flag.AXLE_SCALE_USED), int(Flag.AXLE_
 # impact's accel (g, chair frame) and the gravity the filter had learned by the end of its run
 POSE_WIDTH, IMPACT_WIDTH = 12, 6
 # rows of the scratch array `run_batch` allocates once: F P's rows X, Y, HEADING; a Kalman gain;
-# h P; the 3 x 5 work of the circle fit's solve
-W_FP, W_GAIN, W_ROW, W_LU, W_ROWS = 0, 3, 4, 5, 8
-LAPACK_EPS = 2.0**-53  # dlamch('E'): relative machine precision as LAPACK defines it
+# h P
+W_FP, W_GAIN, W_ROW, W_ROWS = 0, 3, 4, 5
 
 
 def pack_settings(settings: ChairSettings) -> np.ndarray:
@@ -158,7 +157,7 @@ def pack_state(state: ChairState) -> np.ndarray:
     vector[TRAVEL] = state.travel_m
     vector[TURN_XY], vector[TURN_XX] = state.turn_xy, state.turn_xx
     vector[AXIS_XY], vector[AXIS_XX] = state.axis_xy, state.axis_xx
-    vector[MAG_FIT:MAG_FIT + 16] = np.asarray(state.mag.fit, dtype=float).ravel()
+    vector[MAG_FIT:MAG_FIT + MAG_FIT_SIZE] = np.asarray(state.mag.fit, dtype=float)
     vector[MAG_DUE] = state.mag.due_s
     vector[MAG_READY] = state.mag.ready
     vector[MAG_REJECTIONS] = state.mag.rejections
@@ -182,7 +181,7 @@ def unpack_state(vector: np.ndarray) -> ChairState:
     if vector.shape != (STATE_SIZE,):
         raise ValueError(f"a packed chair state has {STATE_SIZE} values, not shape {vector.shape}")
     v = vector
-    mag = MagAid(v[MAG_FIT:MAG_FIT + 16].reshape(4, 4).copy(), float(v[MAG_DUE]), bool(v[MAG_READY]),
+    mag = MagAid(v[MAG_FIT:MAG_FIT + MAG_FIT_SIZE].copy(), float(v[MAG_DUE]), bool(v[MAG_READY]),
                  int(v[MAG_REJECTIONS]), float(v[MAG_INNOVATION]), v[MAG_STATS_AT:MAG_STATS_AT + MAG_STATS].copy(),
                  float(v[MAG_SINCE_READ]), float(v[MAG_SINCE_UPDATE]), float(v[MAG_ANCHOR]), float(v[MAG_TURN_GYRO]),
                  float(v[MAG_TURN_S]), float(v[MAG_TURN_M]), float(v[MAP_OFFSET]), float(v[MAP_VAR]),

@@ -12,15 +12,15 @@ from numba import njit
 
 from edge.chair.state import (BIAS, DEG, GYRO_SCALE, HEADING, M_CHECKS, M_DIFF, M_EXCESS, M_LAST, M_RADIAL, M_RADIUS,
                               M_STEP, M_WEIGHT, MAG_STATS, NORTH, N, X, Y)
-from edge.chair.kernel_math import fma, pow2, sum3, wrap
+from edge.chair.kernel_math import pow2, sum3, wrap
 from edge.chair.layout import (FIELD_COUNT, FIELD_OFFSET, FIELD_TIME_HIGH, FIELD_TIME_LOW, FIELD_VAR, FIELD_X,
-                               FIELD_Y, GRAVITY, LAPACK_EPS, MAG_ANCHOR, MAG_DUE, MAG_INNOVATION, MAG_READY,
+                               FIELD_Y, GRAVITY, MAG_ANCHOR, MAG_DUE, MAG_INNOVATION, MAG_READY,
                                MAG_REJECTED, MAG_REJECTIONS, MAG_SINCE_READ, MAG_SINCE_UPDATE, MAG_STATS_AT,
                                MAG_TURN_GYRO, MAP_OFFSET, MAP_VAR, MAG_TURN_M, MAG_TURN_S, MAG_USED, S_MAG_CORRELATION_MAX, S_MAG_CORRELATION_MIN,
                                S_MAG_CORRELATION_PRIOR, S_MAG_FIT_FORGET, S_MAG_FLOOR_VAR, S_MAG_FORGET,
                                S_MAG_GATE_CHI2, S_MAG_HEADING_VAR, S_MAG_LEVEL_WEIGHT, S_MAG_MIN_POINTS,
                                S_MAG_MIN_SPREAD_SQ, S_MAG_MIN_STEP, S_MAG_PERIOD, S_MAG_RECOVER_REJECTIONS,
-                               S_MAG_TRUST_VAR, S_MAG_TURN_S, S_MAG_TURN_VAR, V_MAG, W_GAIN, W_LU, W_ROW)
+                               S_MAG_TRUST_VAR, S_MAG_TURN_S, S_MAG_TURN_VAR, V_MAG, W_GAIN, W_ROW)
 
 
 @njit(inline='always')
@@ -28,9 +28,9 @@ def magnetometer(s, st, mean, cov, fit, work, sample, time_ns):
     """A due reading: extend the hard-iron fit and the hall's statistics, measure the gyro by the
     field's turn, then learn north or correct the heading (the reference's `magnetometer`)."""
     forward, left = _level(sample, st)
-    _fit_add(fit, forward, left, s[S_MAG_FIT_FORGET])
+    _fit_add(fit, forward, left, mean[HEADING], s[S_MAG_FIT_FORGET])
     st[MAG_DUE] = s[S_MAG_PERIOD]
-    found, centre_x, centre_y = _fit_centre(fit, work[W_LU:W_LU + 3], s[S_MAG_MIN_SPREAD_SQ], s[S_MAG_MIN_POINTS])
+    found, centre_x, centre_y = _fit_centre(fit, s[S_MAG_MIN_SPREAD_SQ], s[S_MAG_MIN_POINTS])
     if not found:
         return 0
     east, north_part = forward - centre_x, left - centre_y
@@ -49,13 +49,12 @@ def magnetometer(s, st, mean, cov, fit, work, sample, time_ns):
             st[FIELD_OFFSET] = wrap(raw_angle - (mean[NORTH] - mean[HEADING]))
             st[FIELD_VAR] = cov[NORTH, NORTH] - 2.0 * cov[NORTH, HEADING] + cov[HEADING, HEADING]
     variance, correlation_m = _mag_disturbance(s, stats)
-    spread_xx, spread_xy, spread_yy = _centre_spread(fit, radius, variance)
+    centre_var = _centre_var(fit, variance)
     flags = 0
     if not math.isfinite(st[MAG_ANCHOR]) or not math.isfinite(st[MAG_TURN_GYRO]):
         _reset_turn(st, raw_angle)
     elif st[MAG_TURN_S] >= s[S_MAG_TURN_S]:
-        flags = _turn_update(s, st, mean, cov, work, raw_angle, variance, correlation_m, spread_xx, spread_xy,
-                             spread_yy)
+        flags = _turn_update(s, st, mean, cov, work, raw_angle, variance, correlation_m, centre_var)
         _reset_turn(st, raw_angle)
     angle = raw_angle  # north - heading: the hub's map's offset out where it knows this place better
     mapped = _trusted(s, st[MAP_VAR]) if st[MAP_VAR] > 0.0 else math.inf
@@ -83,7 +82,7 @@ def magnetometer(s, st, mean, cov, fit, work, sample, time_ns):
     for j in range(N):
         row[j] = cov[NORTH, j] - cov[HEADING, j]  # h P
     predicted = row[NORTH] - row[HEADING]
-    across = _across(spread_xx, spread_xy, spread_yy, -math.sin(angle), math.cos(angle))
+    across = centre_var
     total = predicted + variance + across
     st[MAG_INNOVATION] = innovation / DEG
     st[MAG_SINCE_UPDATE] = 0.0
@@ -113,15 +112,14 @@ def _reset_turn(st, angle):
 
 
 @njit
-def _turn_update(s, st, mean, cov, work, angle, variance, correlation_m, spread_xx, spread_xy, spread_yy):
+def _turn_update(s, st, mean, cov, work, angle, variance, correlation_m, centre_var):
     """The reference's `_turn_update`: the gyro's bias and scale from the field's turn since the anchor."""
     anchor, turn_gyro, turn_s = st[MAG_ANCHOR], st[MAG_TURN_GYRO], st[MAG_TURN_S]
     scale, bias = 1.0 + mean[GYRO_SCALE], mean[BIAS]
     predicted = scale * (turn_gyro - bias * turn_s)
     seen = predicted + wrap(-(angle - anchor) - predicted)
     noise = (2.0 * variance * (1.0 - math.exp(-st[MAG_TURN_M] / correlation_m)) + s[S_MAG_TURN_VAR]
-             + _across(spread_xx, spread_xy, spread_yy, math.sin(anchor) - math.sin(angle),
-                       math.cos(angle) - math.cos(anchor)))
+             + centre_var * _squared_chord(anchor, angle))
     h_bias, h_scale = -scale * turn_s, turn_gyro - bias * turn_s
     innovation = seen - predicted
     gain, row = work[W_GAIN], work[W_ROW]
@@ -140,18 +138,18 @@ def _turn_update(s, st, mean, cov, work, angle, variance, correlation_m, spread_
 
 
 @njit
-def _centre_spread(fit, radius, variance):
-    """The reference's `_centre_spread`."""
-    w = fit[2, 2]
-    mean_x, mean_y = fit[0, 2] / w, fit[1, 2] / w
-    sxx, sxy, syy = fit[0, 0] / w - mean_x * mean_x, fit[1, 0] / w - mean_y * mean_x, fit[1, 1] / w - mean_y * mean_y
-    scale = radius * radius * variance / (w * (sxx * syy - sxy * sxy))
-    return scale * syy, -scale * sxy, scale * sxx
+def _centre_var(fit, variance):
+    """The reference's `_centre_var`."""
+    w = fit[0]
+    mean_cos, mean_sin = fit[1] / w, fit[2] / w
+    return variance / (w * (1.0 - mean_cos * mean_cos - mean_sin * mean_sin))
 
 
 @njit(inline='always')
-def _across(xx, xy, yy, nx, ny):
-    return xx * nx * nx + 2.0 * xy * nx * ny + yy * ny * ny
+def _squared_chord(a, b):
+    """The reference's `_squared_chord`."""
+    along, across = math.sin(a) - math.sin(b), math.cos(b) - math.cos(a)
+    return along * along + across * across
 
 
 @njit
@@ -217,109 +215,27 @@ def _level(sample, st):
 
 
 @njit
-def _fit_add(fit, x, y, forget):
-    vector = (x, y, 1.0, pow2(x) + pow2(y))
-    for i in range(4):
-        for j in range(4):
-            fit[i, j] = forget * fit[i, j] + vector[i] * vector[j]
+def _fit_add(fit, x, y, heading, forget):
+    """The reference's `_fit_add`, in place."""
+    c, s = math.cos(heading), math.sin(heading)
+    fit[0] = forget * fit[0] + 1.0
+    fit[1] = forget * fit[1] + c
+    fit[2] = forget * fit[2] + s
+    fit[3] = forget * fit[3] + x
+    fit[4] = forget * fit[4] + y
+    fit[5] = forget * fit[5] + (c * x - s * y)
+    fit[6] = forget * fit[6] + (s * x + c * y)
 
 
 @njit
-def _fit_centre(fit, lu, min_spread_sq, min_points):
-    """(found, centre x, centre y) of the circle x^2 + y^2 = a x + b y + c fitted to the moments.
-
-    Not found until the points spread around the circle: the smaller principal spread of the
-    points must reach `min_spread` of the radius (a full circle gives 1/sqrt(2) = 0.71).
-    """
-    weight = fit[2, 2]
+def _fit_centre(fit, min_spread_sq, min_points):
+    """(found, centre x, centre y): the reference's `_fit_centre`."""
+    weight = fit[0]
     if weight < min_points:
         return False, 0.0, 0.0
-    mean_x, mean_y = fit[0, 2] / weight, fit[1, 2] / weight
-    scatter_xx = fit[0, 0] / weight - mean_x * mean_x
-    scatter_yx = fit[1, 0] / weight - mean_y * mean_x
-    scatter_yy = fit[1, 1] / weight - mean_y * mean_y
-    solved, a, b, c = _solve3(fit, lu)
-    if not solved:
+    c, s = fit[1] / weight, fit[2] / weight
+    spread = 1.0 - c * c - s * s
+    if spread < min_spread_sq:
         return False, 0.0, 0.0
-    centre_x, centre_y = a / 2.0, b / 2.0
-    radius_sq = c + pow2(centre_x) + pow2(centre_y)
-    smallest = _smallest_eigenvalue(scatter_xx, scatter_yx, scatter_yy)
-    if radius_sq <= 0.0 or 2.0 * smallest < min_spread_sq * radius_sq:
-        return False, 0.0, 0.0
-    return True, centre_x, centre_y
-
-
-@njit
-def _solve3(fit, lu):
-    """fit[:3, :3] z = fit[:3, 3] as OpenBLAS's dgesv does it (numpy's solve); not solved if singular.
-
-    Left-looking LU with partial pivoting (getf2: the first largest |pivot|, the column below it
-    scaled by its reciprocal), then the two triangular solves (trsv: axpy updates, division by
-    the diagonal), with multiply-adds fused where OpenBLAS's kernels fuse them. `lu` (3 x 5) is
-    scratch: the matrix, then the right-hand side, then each row's pivot.
-    """
-    for i in range(3):
-        for k in range(4):
-            lu[i, k] = fit[i, k]
-    for j in range(3):
-        for i in range(j):  # the earlier row swaps, applied to this column
-            p = int(lu[i, 4])
-            lu[i, j], lu[p, j] = lu[p, j], lu[i, j]
-        if j == 1:  # the column less L times U above it
-            lu[1, 1] -= lu[1, 0] * lu[0, 1]
-            lu[2, 1] -= lu[2, 0] * lu[0, 1]
-        elif j == 2:
-            lu[1, 2] -= lu[1, 0] * lu[0, 2]
-            lu[2, 2] -= fma(lu[2, 1], lu[1, 2], lu[2, 0] * lu[0, 2])
-        p = j
-        for r in range(j + 1, 3):
-            if abs(lu[r, j]) > abs(lu[p, j]):
-                p = r
-        lu[j, 4] = p
-        if lu[p, j] == 0.0:
-            return False, 0.0, 0.0, 0.0
-        reciprocal = 1.0 / lu[p, j]
-        for k in range(j + 1):  # swap the rows so far (not the right-hand side, not the pivots)
-            lu[j, k], lu[p, k] = lu[p, k], lu[j, k]
-        for r in range(j + 1, 3):
-            lu[r, j] *= reciprocal
-    for i in range(3):  # the right-hand side: row swaps, then L (unit diagonal), then U
-        p = int(lu[i, 4])
-        lu[i, 3], lu[p, 3] = lu[p, 3], lu[i, 3]
-    for i in range(3):
-        for k in range(i + 1, 3):
-            lu[k, 3] = fma(-lu[i, 3], lu[k, i], lu[k, 3])
-    for i in range(2, -1, -1):
-        lu[i, 3] = lu[i, 3] / lu[i, i]
-        for k in range(i):
-            lu[k, 3] = fma(-lu[i, 3], lu[k, i], lu[k, 3])
-    return True, lu[0, 3], lu[1, 3], lu[2, 3]
-
-
-@njit
-def _smallest_eigenvalue(d1, e, d2):
-    """Smaller eigenvalue of [[d1, e], [e, d2]] as numpy's eigvalsh gets it (LAPACK dsterf, dlae2)."""
-    if abs(e) <= math.sqrt(abs(d1)) * math.sqrt(abs(d2)) * LAPACK_EPS:
-        return min(d1, d2)  # already diagonal to working precision
-    e_sq = e * e
-    if e_sq <= (LAPACK_EPS * LAPACK_EPS) * abs(d1 * d2):
-        return min(d1, d2)
-    b = math.sqrt(e_sq)
-    a, c = (d2, d1) if abs(d2) < abs(d1) else (d1, d2)  # dsterf's QR or QL orientation
-    sm, adf, ab = a + c, abs(a - c), abs(b + b)
-    acmx, acmn = (a, c) if abs(a) > abs(c) else (c, a)
-    if adf > ab:
-        rt = adf * math.sqrt(1.0 + (ab / adf) * (ab / adf))
-    elif adf < ab:
-        rt = ab * math.sqrt(1.0 + (adf / ab) * (adf / ab))
-    else:
-        rt = ab * math.sqrt(2.0)
-    if sm < 0.0:
-        rt1 = 0.5 * (sm - rt)
-        rt2 = (acmx / rt1) * acmn - (b / rt1) * b
-    elif sm > 0.0:
-        rt1 = 0.5 * (sm + rt)
-        rt2 = (acmx / rt1) * acmn - (b / rt1) * b
-    else:
-        rt1, rt2 = 0.5 * rt, -0.5 * rt
-    return min(rt1, rt2)
+    x, y, p, q = fit[3] / weight, fit[4] / weight, fit[5] / weight, fit[6] / weight
+    return True, (x - c * p - s * q) / spread, (y + s * p - c * q) / spread

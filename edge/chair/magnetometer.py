@@ -2,9 +2,14 @@
 `magnetometer` with every sample; edge/chair/mag_kernel.py is its compiled mirror.
 
 The seat magnetometer is a self-calibrating aid that learns the hall it is in. The chair's hard
-iron is a fixed offset in the chair frame, found by a running circle fit as the chair turns;
-around its centre the field's angle is (north - heading). A building's disturbance is fixed in
-space, about isotropic, and nobody knows it in advance (0-25 deg RMS, correlated over 1-10 m):
+iron is a fixed offset in the chair frame, found as the chair turns by a running least-squares fit
+of reading = centre + R(-heading) field, the heading the filter's: around the centre the field's
+angle is (north - heading). A circle fit, which needs no heading, reads the hall's changes of the
+field's strength from place to place as the circle's shape (in a hall disturbed by 23 deg RMS its
+centre put the readings 12-30 deg RMS off the truth where the fit against the heading leaves 8-15,
+docs/reckon-estimator.md); a constant error of the heading only turns the fitted field, not the
+centre. A building's disturbance is fixed in space, about isotropic, and nobody knows it in advance
+(0-25 deg RMS, correlated over 1-10 m):
 - its size is learned from the spread of the field's strength around the circle (a disturbance
   that turns the field by a degrees changes its strength by as much), its correlation length
   from how fast successive readings' strengths differ over the travel between them;
@@ -54,7 +59,8 @@ def magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, grav
         return replace(mag, due_s=due, since_read_m=since_read, since_update_m=since_update, turn_gyro_rad=turn_gyro,
                        turn_s=turn_s, turn_m=turn_m), mean, cov, Flag.NONE
     horizontal = _level(sample.mag_gauss, gravity)
-    fit = _fit_add(mag.fit, horizontal, math.exp(-settings.mag_period_s / settings.mag_fit_memory_s))
+    forget = math.exp(-settings.mag_period_s / settings.mag_fit_memory_s)
+    fit = _fit_add(mag.fit, horizontal, float(mean[HEADING]), forget)
     mag = replace(mag, fit=fit, due_s=settings.mag_period_s, since_read_m=since_read, since_update_m=since_update,
                   turn_gyro_rad=turn_gyro, turn_s=turn_s, turn_m=turn_m)
     centre = _fit_centre(fit, settings.mag_fit_min_spread, settings.mag_fit_min_points)
@@ -70,12 +76,12 @@ def magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, grav
                           field_y_m=float(mean[Y]), field_offset_rad=wrap(raw_angle - (mean[NORTH] - mean[HEADING])),
                           field_var_rad2=float(cov[NORTH, NORTH] - 2.0 * cov[NORTH, HEADING] + cov[HEADING, HEADING]))
     variance, correlation_m = mag_disturbance(settings, mag.stats)
-    centre_spread = _centre_spread(fit, radius, variance)  # the strength's spread: untouched by a map of directions
+    centre_var = _centre_var(fit, variance)  # the strength's spread: untouched by a map of directions
     flags = Flag.NONE
     if not math.isfinite(mag.anchor_angle) or not math.isfinite(turn_gyro):
         mag = replace(mag, anchor_angle=raw_angle, turn_gyro_rad=0.0, turn_s=0.0, turn_m=0.0)
     elif turn_s >= settings.mag_turn_s:
-        mean, cov, flags = _turn_update(settings, mag, raw_angle, mean, cov, variance, correlation_m, centre_spread)
+        mean, cov, flags = _turn_update(settings, mag, raw_angle, mean, cov, variance, correlation_m, centre_var)
         mag = replace(mag, anchor_angle=raw_angle, turn_gyro_rad=0.0, turn_s=0.0, turn_m=0.0)
     # north - heading: where the hub's map knows this place better than the hall's own model, its offset out
     # (the turn above is a difference over metres, which a map's errors from cell to cell would only add to)
@@ -97,7 +103,7 @@ def magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, grav
     innovation = wrap(angle - (mean[NORTH] - mean[HEADING]))
     h = np.zeros(N)
     h[NORTH], h[HEADING] = 1.0, -1.0
-    predicted, across = float(h @ cov @ h), _across(centre_spread, -math.sin(angle), math.cos(angle))
+    predicted, across = float(h @ cov @ h), centre_var  # the centre's error across the field, as far along any line
     total = predicted + variance + across
     mag = replace(mag, innovation_deg=innovation / DEG, since_update_m=0.0)
     # the hall's own readings checked against a heading known better than they claim to be (an uncertain
@@ -111,8 +117,7 @@ def magnetometer(settings: ChairSettings, mag: MagAid, sample: ChairSample, grav
 
 
 def _turn_update(settings: ChairSettings, mag: MagAid, angle: float, mean: np.ndarray, cov: np.ndarray,
-                 variance: float, correlation_m: float, centre_spread: tuple[float, float, float]
-                 ) -> tuple[np.ndarray, np.ndarray, Flag]:
+                 variance: float, correlation_m: float, centre_var: float) -> tuple[np.ndarray, np.ndarray, Flag]:
     """The gyro's bias and scale from the turn the field saw since the anchor reading.
 
     The disturbance is the hall's, fixed in space: over little travel it hardly changes, so the
@@ -123,8 +128,7 @@ def _turn_update(settings: ChairSettings, mag: MagAid, angle: float, mean: np.nd
     predicted = scale * (mag.turn_gyro_rad - bias * mag.turn_s)
     seen = predicted + wrap(-(angle - mag.anchor_angle) - predicted)  # unwrapped near the gyro's turn
     noise = (2.0 * variance * (1.0 - math.exp(-mag.turn_m / correlation_m)) + (settings.mag_turn_sd_deg * DEG) ** 2
-             + _across(centre_spread, math.sin(mag.anchor_angle) - math.sin(angle),
-                       math.cos(angle) - math.cos(mag.anchor_angle)))
+             + centre_var * _squared_chord(mag.anchor_angle, angle))
     h_bias, h_scale = -scale * mag.turn_s, mag.turn_gyro_rad - bias * mag.turn_s  # d predicted / d state
     innovation = seen - predicted
     row = h_bias * cov[BIAS] + h_scale * cov[GYRO_SCALE]  # h P
@@ -135,22 +139,21 @@ def _turn_update(settings: ChairSettings, mag: MagAid, angle: float, mean: np.nd
     return mean + gain * innovation, cov - np.outer(gain, row), Flag.MAG_USED
 
 
-def _centre_spread(fit: np.ndarray, radius: float, variance: float) -> tuple[float, float, float]:
-    """(xx, xy, yy) covariance of the fitted circle's centre over its radius squared (rad^2).
+def _centre_var(fit: np.ndarray, variance: float) -> float:
+    """Variance (rad^2) of the fitted centre, along any line, over the field's strength squared.
 
-    The algebraic residual of a reading a relative distance e off the circle is 2 r^2 e, so the
-    least-squares centre has covariance r^2 var(e) S^-1 / w, S the readings' scatter and w their
-    weight: 2 var(e) / w on a full circle, more on a short arc."""
-    w = fit[2, 2]
-    mean_x, mean_y = fit[0, 2] / w, fit[1, 2] / w
-    sxx, sxy, syy = fit[0, 0] / w - mean_x * mean_x, fit[1, 0] / w - mean_y * mean_x, fit[1, 1] / w - mean_y * mean_y
-    scale = radius * radius * variance / (w * (sxx * syy - sxy * sxy))
-    return scale * syy, -scale * sxy, scale * sxx
+    A disturbance turning the field by var rad^2 moves each reading by as much along and across:
+    r^2 var per axis. The least-squares centre of w readings whose headings' mean resultant length
+    is R then has r^2 var / (w (1 - R^2)) per axis: var / w after a full turn, more on a short arc."""
+    w = fit[0]
+    mean_cos, mean_sin = fit[1] / w, fit[2] / w
+    return variance / (w * (1.0 - mean_cos * mean_cos - mean_sin * mean_sin))
 
 
-def _across(spread: tuple[float, float, float], nx: float, ny: float) -> float:
-    """The variance (rad^2) a centre of covariance `spread` adds to a field angle along (nx, ny)."""
-    return spread[0] * nx * nx + 2.0 * spread[1] * nx * ny + spread[2] * ny * ny
+def _squared_chord(a: float, b: float) -> float:
+    """|u(a) - u(b)|^2 of the unit vectors at angles a and b: how far a centre error turns one reading against another."""
+    along, across = math.sin(a) - math.sin(b), math.cos(b) - math.cos(a)
+    return along * along + across * across
 
 
 def _learn_disturbance(settings: ChairSettings, stats: np.ndarray, radius: float, step_m: float) -> np.ndarray:
@@ -230,29 +233,27 @@ def _level(field: tuple[float, float, float], gravity: tuple[float, float, float
     return (sum(h * f for h, f in zip(horizontal, forward)), sum(h * lv for h, lv in zip(horizontal, left)))
 
 
-def _fit_add(moments: np.ndarray, point: tuple[float, float], forget: float) -> np.ndarray:
-    vector = np.array([point[0], point[1], 1.0, point[0] ** 2 + point[1] ** 2])
-    return forget * moments + np.outer(vector, vector)
+def _fit_add(sums: np.ndarray, point: tuple[float, float], heading: float, forget: float) -> np.ndarray:
+    """The fit's running sums after one more reading `point` (forward, left) taken at `heading`:
+    [weight, cos, sin, forward, left, cos forward - sin left, sin forward + cos left]."""
+    c, s = math.cos(heading), math.sin(heading)
+    x, y = point
+    return forget * sums + np.array([1.0, c, s, x, y, c * x - s * y, s * x + c * y])
 
 
-def _fit_centre(moments: np.ndarray, min_spread: float, min_points: float) -> tuple[float, float] | None:
-    """Centre of the circle x^2 + y^2 = a x + b y + c fitted to the running moments.
+def _fit_centre(sums: np.ndarray, min_spread: float, min_points: float) -> tuple[float, float] | None:
+    """The centre of reading = centre + R(-heading) field, least squares over the running sums.
 
-    None until the points spread around the circle: the smaller principal spread of the
-    points must reach `min_spread` of the radius (a full circle gives 1/sqrt(2) = 0.71).
+    The normal equations' field part eliminated, each axis of the centre is one division by
+    1 - R^2, R the mean resultant length of the headings seen. None until they spread: 1 - R^2
+    must reach `min_spread` squared (a full turn gives 1, half a turn 0.59).
     """
-    weight = moments[2, 2]
+    weight = sums[0]
     if weight < min_points:
         return None
-    mean = moments[:2, 2] / weight
-    scatter = moments[:2, :2] / weight - np.outer(mean, mean)
-    try:
-        a, b, c = np.linalg.solve(moments[:3, :3], moments[:3, 3])
-    except np.linalg.LinAlgError:
+    c, s = sums[1] / weight, sums[2] / weight
+    spread = 1.0 - c * c - s * s
+    if spread < min_spread * min_spread:
         return None
-    centre = (float(a) / 2.0, float(b) / 2.0)
-    radius_sq = c + centre[0] ** 2 + centre[1] ** 2
-    smallest = float(np.linalg.eigvalsh(scatter)[0])
-    if radius_sq <= 0.0 or 2.0 * smallest < min_spread**2 * radius_sq:
-        return None
-    return centre
+    x, y, p, q = sums[3] / weight, sums[4] / weight, sums[5] / weight, sums[6] / weight
+    return (x - c * p - s * q) / spread, (y + s * p - c * q) / spread

@@ -19,6 +19,7 @@ N = 7
 # readings' squared innovations beyond what the filter's heading explains, and their weight.
 M_WEIGHT, M_RADIAL, M_DIFF, M_STEP, M_RADIUS, M_LAST, M_EXCESS, M_CHECKS = range(8)
 MAG_STATS = 8
+MAG_FIT_SIZE = 7  # MagAid.fit: the hard-iron fit's running sums
 
 
 class Flag(enum.IntFlag):
@@ -79,8 +80,8 @@ class ChairSettings:
     mag_turn_sd_deg: float = 1.5  # noise of a turn the field saw (two readings, the fit's centre error)
     mag_trust_sd_deg: float = 3.0  # beyond this disturbance a reading's variance grows with its square (docs/reckon-estimator.md: worlds 1-10)
     mag_gate_chi2: float = 6.63  # 99 % for 1 dof
-    mag_fit_memory_s: float = 300.0  # forgetting time of the hard-iron circle fit
-    mag_fit_min_spread: float = 0.5  # the fit is trusted once field angles spread this well (0..1)
+    mag_fit_memory_s: float = 300.0  # forgetting time of the hard-iron fit
+    mag_fit_min_spread: float = 0.5  # the fit is trusted once headings spread this well: sqrt(1 - R^2), 0..1
     mag_fit_min_points: int = 40  # and once it holds this many updates' worth of points (20 s)
     mag_recover_rejections: int = 20  # this many rejections in a row: north is re-learned (as Fusion does)
 
@@ -106,7 +107,7 @@ class ChairSample:
 class MagAid:
     """The magnetometer aid's own state: hard-iron fit, the hall's learned disturbance, bookkeeping (fixed size)."""
 
-    fit: np.ndarray  # (4, 4) running moments [x, y, 1, x^2 + y^2] of the levelled field
+    fit: np.ndarray  # (7,) running sums of the hard-iron fit (magnetometer.py's `_fit_add`)
     due_s: float  # time until the next reading
     ready: bool  # north has been initialised from the fit
     rejections: int  # consecutive gate rejections

@@ -24,7 +24,7 @@ from reckon.evaluation.reckon_run import merged_samples
 from support.games import Game
 
 # a magnetometer aid that trusts its fit early and gates hard: rejections and re-learning north
-STRICT_MAG = dict(mag_fit_min_points=10, mag_fit_min_spread=0.3, mag_gate_chi2=0.05, mag_recover_rejections=3)
+STRICT_MAG = dict(mag_fit_min_points=10, mag_fit_min_spread=0.3, mag_gate_chi2=0.01, mag_recover_rejections=3)
 GAME = Game(players=2, duration_s=30.0, seed=7)
 
 
