@@ -11,11 +11,10 @@ Same operations in the same order round the same, so the two agree bit for bit (
 x86-64, Python 3.11, numpy 2.4 with its bundled OpenBLAS 0.3.31), and elsewhere in the last bits:
 - Python's `x ** 2` is libm's pow(x, 2.0), which differs from x * x in the last bit for ~0.1 %
   of values: the kernel calls pow too (`pow2`), never letting LLVM turn it into x * x.
-- numpy hands the 7x7 products and the 3x3 solve to OpenBLAS, whose small-matrix kernels sum
-  each dot product in index order with fused multiply-adds: the kernel does the same (`fma`),
-  skipping only the Jacobian's structural zeros, which add nothing there either. Another BLAS
-  build or CPU may sum in another order: ~1e-14 apart after a game (the tests allow 1e-9).
-- The eigenvalue check repeats LAPACK's 2x2 formula (dlae2), as numpy's eigvalsh runs it.
+- numpy hands the 7x7 products to OpenBLAS, whose small-matrix kernels sum each dot product in
+  index order with fused multiply-adds: the kernel does the same (`fma`), skipping only the
+  Jacobian's structural zeros, which add nothing there either. Another BLAS build or CPU may sum
+  in another order: ~1e-14 apart after a game (the tests allow 1e-9).
 - Python 3.12's sum() of floats is compensated; the kernel sums plainly, as 3.11 does.
 
 How it runs: the edge, `reckon eval` and the bench load it ahead-of-time compiled (numba.pycc, built
