@@ -253,7 +253,7 @@ def _fit_centre(sums: np.ndarray, min_spread: float, min_points: float) -> tuple
         return None
     c, s = sums[1] / weight, sums[2] / weight
     spread = 1.0 - c * c - s * s
-    if spread < min_spread * min_spread:
+    if spread < min_spread**2:
         return None
     x, y, p, q = sums[3] / weight, sums[4] / weight, sums[5] / weight, sums[6] / weight
     return (x - c * p - s * q) / spread, (y + s * p - c * q) / spread
